@@ -1,0 +1,1 @@
+"""Curve fitters: open NURBS and 3-D skeletonisation."""

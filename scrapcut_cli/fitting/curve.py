@@ -1,0 +1,110 @@
+"""Curve types shared by the fitters, the tool path, exploration and evaluation."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.interpolate import BSpline
+
+from scrapcut_cli.geometry import polyline_length, resample_polyline
+
+
+@dataclass(frozen=True, eq=False)
+class NurbsModel:
+    """A NURBS curve: degree p, knot vector (M + p + 1,), control points (M, 3), weights (M,).
+
+    Parameter domain is ``[knots[p], knots[-p-1]]`` (``[0, 1]`` for the fitter's clamped knots).
+    """
+
+    degree: int
+    knots: NDArray[np.float64]
+    control_points: NDArray[np.float64]
+    weights: NDArray[np.float64]
+
+    def __post_init__(self) -> None:
+        m = len(self.control_points)
+        if len(self.knots) != m + self.degree + 1:
+            raise ValueError(
+                f"a degree-{self.degree} NURBS with {m} control points needs "
+                f"{m + self.degree + 1} knots, got {len(self.knots)}"
+            )
+        if len(self.weights) != m:
+            raise ValueError(f"{m} control points but {len(self.weights)} weights")
+
+    @property
+    def domain(self) -> tuple[float, float]:
+        return float(self.knots[self.degree]), float(self.knots[-self.degree - 1])
+
+    def evaluate(self, t: ArrayLike) -> NDArray[np.float64]:
+        """Points (N, 3) at parameters ``t`` (N,), clamped to the domain (never wrapped)."""
+        lo, hi = self.domain
+        tt = np.clip(np.asarray(t, dtype=np.float64), lo, hi)
+        w = np.asarray(self.weights, dtype=np.float64)
+        homogeneous = np.column_stack([self.control_points * w[:, None], w])
+        spline = BSpline(self.knots, homogeneous, self.degree, extrapolate=False)
+        h = np.atleast_2d(spline(tt))
+        return np.asarray(h[:, :3] / h[:, 3:4])
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "degree": int(self.degree),
+            "knots": [float(k) for k in self.knots],
+            "control_points": [[float(c) for c in p] for p in self.control_points],
+            "weights": [float(w) for w in self.weights],
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> NurbsModel:
+        return cls(
+            degree=int(data["degree"]),
+            knots=np.asarray(data["knots"], dtype=np.float64),
+            control_points=np.asarray(data["control_points"], dtype=np.float64).reshape(-1, 3),
+            weights=np.asarray(data["weights"], dtype=np.float64),
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class Curve:
+    """An ordered polyline (N, 3) in the base frame plus the fitting method's own model.
+
+    ``points`` are evenly resampled along the curve (spacing ``spacing_m``). ``nurbs`` is set by
+    the NURBS fitter; ``info`` carries method diagnostics (residuals, iterations, pieces...).
+    """
+
+    points: NDArray[np.float64]
+    method: str
+    nurbs: NurbsModel | None = None
+    spacing_m: float = 0.001
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def length(self) -> float:
+        """Arc length in metres."""
+        return polyline_length(self.points)
+
+    def sample(self, spacing: float) -> NDArray[np.float64]:
+        """Evenly spaced points (K, 3), ``spacing`` metres apart, both ends included."""
+        return resample_polyline(self.points, spacing)
+
+    def reversed(self) -> Curve:
+        """The same curve traversed the other way."""
+        nurbs = None
+        if self.nurbs is not None:
+            n = self.nurbs
+            lo, hi = n.domain
+            nurbs = NurbsModel(
+                degree=n.degree,
+                knots=(lo + hi) - n.knots[::-1],
+                control_points=n.control_points[::-1].copy(),
+                weights=n.weights[::-1].copy(),
+            )
+        return Curve(
+            points=self.points[::-1].copy(),
+            method=self.method,
+            nurbs=nurbs,
+            spacing_m=self.spacing_m,
+            info=dict(self.info),
+        )

@@ -1,0 +1,295 @@
+"""Rigid transforms, quaternions, polylines and nearest-point queries.
+
+Conventions (DESIGN.md): ``T_a_b`` is a (4, 4) float64 matrix mapping points expressed in frame
+``b`` into frame ``a``; quaternions are (x, y, z, w) as ROS has them; lengths are metres.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+FloatArray = NDArray[np.float64]
+
+
+# --------------------------------------------------------------------------- SE(3)
+
+
+def make_transform(rotation: ArrayLike, translation: ArrayLike) -> FloatArray:
+    """Build ``T`` (4, 4) from a (3, 3) rotation matrix and a (3,) translation in metres."""
+    T = np.eye(4)
+    T[:3, :3] = np.asarray(rotation, dtype=np.float64)
+    T[:3, 3] = np.asarray(translation, dtype=np.float64)
+    return T
+
+
+def invert_transform(T: ArrayLike) -> FloatArray:
+    """Inverse of a rigid transform, using the rotation's transpose (exact, no ``inv``)."""
+    T = np.asarray(T, dtype=np.float64)
+    R = T[:3, :3]
+    out = np.eye(4)
+    out[:3, :3] = R.T
+    out[:3, 3] = -R.T @ T[:3, 3]
+    return out
+
+
+def transform_points(T_a_b: ArrayLike, points_b: ArrayLike) -> FloatArray:
+    """Map ``points_b`` (N, 3) from frame b into frame a with ``T_a_b`` (4, 4)."""
+    T = np.asarray(T_a_b, dtype=np.float64)
+    pts = np.asarray(points_b, dtype=np.float64).reshape(-1, 3)
+    return pts @ T[:3, :3].T + T[:3, 3]
+
+
+def rotate_vectors(T_a_b: ArrayLike, vectors_b: ArrayLike) -> FloatArray:
+    """Rotate direction vectors (N, 3) from frame b into frame a (no translation)."""
+    T = np.asarray(T_a_b, dtype=np.float64)
+    return np.asarray(vectors_b, dtype=np.float64).reshape(-1, 3) @ T[:3, :3].T
+
+
+def quat_xyzw_to_matrix(quat_xyzw: ArrayLike) -> FloatArray:
+    """(3, 3) rotation matrix (or (N, 3, 3)) from unit quaternion(s) (x, y, z, w)."""
+    return np.asarray(Rotation.from_quat(np.asarray(quat_xyzw, dtype=np.float64)).as_matrix())
+
+
+def matrix_to_quat_xyzw(rotation: ArrayLike) -> FloatArray:
+    """Quaternion(s) (x, y, z, w) with w >= 0 from (3, 3) or (N, 3, 3) rotation matrices."""
+    q = np.asarray(Rotation.from_matrix(np.asarray(rotation, dtype=np.float64)).as_quat())
+    # A canonical sign makes outputs reproducible byte for byte.
+    sign = np.where(q[..., 3:4] < 0.0, -1.0, 1.0)
+    return np.asarray(q * sign)
+
+
+def transform_from_pose(position: ArrayLike, quat_xyzw: ArrayLike) -> FloatArray:
+    """``T`` (4, 4) from a position (3,) and a quaternion (x, y, z, w)."""
+    return make_transform(quat_xyzw_to_matrix(quat_xyzw), position)
+
+
+def pose_from_transform(T: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """(position (3,), quaternion (x, y, z, w)) of a rigid transform."""
+    T = np.asarray(T, dtype=np.float64)
+    return T[:3, 3].copy(), matrix_to_quat_xyzw(T[:3, :3])
+
+
+def interpolate_transform(T0: ArrayLike, T1: ArrayLike, alpha: float) -> FloatArray:
+    """Pose between ``T0`` (alpha = 0) and ``T1`` (alpha = 1): lerp translation, slerp rotation."""
+    T0 = np.asarray(T0, dtype=np.float64)
+    T1 = np.asarray(T1, dtype=np.float64)
+    r0 = Rotation.from_matrix(T0[:3, :3])
+    r1 = Rotation.from_matrix(T1[:3, :3])
+    delta = (r0.inv() * r1).as_rotvec()
+    R = (r0 * Rotation.from_rotvec(alpha * delta)).as_matrix()
+    t = (1.0 - alpha) * T0[:3, 3] + alpha * T1[:3, 3]
+    return make_transform(R, t)
+
+
+def rotation_angle(R_a: ArrayLike, R_b: ArrayLike) -> float:
+    """Angle in radians of the rotation taking ``R_a`` to ``R_b`` (both (3, 3))."""
+    R = np.asarray(R_a, dtype=np.float64).T @ np.asarray(R_b, dtype=np.float64)
+    c = (np.trace(R) - 1.0) / 2.0
+    return float(np.arccos(np.clip(c, -1.0, 1.0)))
+
+
+def look_at(eye: ArrayLike, target: ArrayLike, up_hint: ArrayLike = (0.0, 0.0, 1.0)) -> FloatArray:
+    """Camera pose ``T_base_cam`` with the optical axis (+z) from ``eye`` towards ``target``.
+
+    Optical frame convention (REP-103): z forward, x right, y down. ``up_hint`` is a direction
+    in the base frame that should appear "up" (−y) in the image; if it is parallel to the
+    viewing direction another axis is used.
+    """
+    eye = np.asarray(eye, dtype=np.float64)
+    z = np.asarray(target, dtype=np.float64) - eye
+    norm = np.linalg.norm(z)
+    if norm < 1e-12:
+        raise ValueError("look_at: eye and target coincide")
+    z /= norm
+    up = np.asarray(up_hint, dtype=np.float64)
+    if abs(float(np.dot(up / np.linalg.norm(up), z))) > 0.999:
+        up = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(z, up)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return make_transform(np.column_stack([x, y, z]), eye)
+
+
+def orthonormal_frame(z_axis: ArrayLike, x_hint: ArrayLike) -> FloatArray:
+    """(3, 3) rotation with columns (x, y, z): z along ``z_axis``, x as close to ``x_hint``.
+
+    If ``x_hint`` is (nearly) parallel to ``z_axis`` an arbitrary perpendicular x is chosen.
+    """
+    z = np.asarray(z_axis, dtype=np.float64)
+    z = z / np.linalg.norm(z)
+    x = np.asarray(x_hint, dtype=np.float64)
+    x = x - np.dot(x, z) * z
+    if np.linalg.norm(x) < 1e-9:
+        helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        x = helper - np.dot(helper, z) * z
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return np.column_stack([x, y, z])
+
+
+# --------------------------------------------------------------------------- polylines
+
+
+def polyline_length(points: ArrayLike) -> float:
+    """Total length in metres of an ordered polyline (N, 3)."""
+    pts = np.asarray(points, dtype=np.float64)
+    if len(pts) < 2:
+        return 0.0
+    return float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
+
+
+def cumulative_length(points: ArrayLike) -> FloatArray:
+    """Arc length (N,) at each vertex of an ordered polyline, starting at 0."""
+    pts = np.asarray(points, dtype=np.float64)
+    if len(pts) == 0:
+        return np.zeros(0)
+    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    return np.concatenate([[0.0], np.cumsum(seg)])
+
+
+def resample_polyline(points: ArrayLike, spacing: float) -> FloatArray:
+    """Evenly spaced points along an ordered polyline (N, 3), ``spacing`` metres apart.
+
+    The first and last vertices are kept; the spacing is adjusted to divide the length
+    evenly, so consecutive points are at most ``spacing`` apart along the curve.
+    """
+    if spacing <= 0:
+        raise ValueError(f"spacing must be positive, got {spacing}")
+    pts = np.asarray(points, dtype=np.float64)
+    if len(pts) < 2:
+        return pts.copy()
+    s = cumulative_length(pts)
+    total = s[-1]
+    if total <= 0:
+        return pts[:1].copy()
+    n = max(int(np.ceil(total / spacing - 1e-9)), 1) + 1
+    return interpolate_polyline(pts, np.linspace(0.0, total, n), cumulative=s)
+
+
+def interpolate_polyline(
+    points: ArrayLike, arc_lengths: ArrayLike, *, cumulative: ArrayLike | None = None
+) -> FloatArray:
+    """Points (M, 3) on an ordered polyline at the given arc lengths (M,), clamped to its ends."""
+    pts = np.asarray(points, dtype=np.float64)
+    s = cumulative_length(pts) if cumulative is None else np.asarray(cumulative, dtype=np.float64)
+    q = np.clip(np.asarray(arc_lengths, dtype=np.float64), 0.0, s[-1])
+    # Drop zero-length segments so interpolation is well defined.
+    keep = np.concatenate([[True], np.diff(s) > 0])
+    s, pts = s[keep], pts[keep]
+    if len(pts) == 1:
+        return np.repeat(pts, len(q), axis=0)
+    return np.column_stack([np.interp(q, s, pts[:, k]) for k in range(3)])
+
+
+def polyline_tangents(points: ArrayLike) -> FloatArray:
+    """Unit tangents (N, 3) of an ordered polyline (central differences, one-sided at ends)."""
+    pts = np.asarray(points, dtype=np.float64)
+    if len(pts) < 2:
+        raise ValueError("a polyline needs at least two points for tangents")
+    t = np.gradient(pts, axis=0)
+    n = np.linalg.norm(t, axis=1, keepdims=True)
+    n[n == 0] = 1.0
+    return np.asarray(t / n)
+
+
+class PolylineDistance:
+    """Exact distances from query points to an ordered polyline (nearest point on its segments).
+
+    Candidate segments come from a KD-tree over the segment midpoints; a segment can only be
+    nearest if its midpoint is within (distance to the nearest midpoint + longest half segment),
+    so the search is exact, not approximate.
+    """
+
+    def __init__(self, points: ArrayLike) -> None:
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if len(pts) == 0:
+            raise ValueError("polyline is empty")
+        if len(pts) == 1:
+            pts = np.vstack([pts, pts])
+        self.points = pts
+        self._a = pts[:-1]
+        self._d = pts[1:] - pts[:-1]
+        self._len2 = np.einsum("ij,ij->i", self._d, self._d)
+        half = 0.5 * np.sqrt(self._len2)
+        self._half_max = float(half.max())
+        self._tree = cKDTree(self._a + 0.5 * self._d)
+
+    def query(self, query_points: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Distances (M,), nearest points (M, 3), and polyline parameters (M,).
+
+        The parameter is ``segment_index + fraction`` in [0, N - 1].
+        """
+        q = np.asarray(query_points, dtype=np.float64).reshape(-1, 3)
+        m = len(q)
+        best_d2 = np.full(m, np.inf)
+        best_p = np.zeros((m, 3))
+        best_u = np.zeros(m)
+        if m == 0:
+            return best_d2, best_p, best_u
+        d0, _ = self._tree.query(q)
+        radius = d0 + self._half_max + 1e-12
+        candidates = self._tree.query_ball_point(q, radius)
+        lengths = np.fromiter((len(c) for c in candidates), dtype=np.int64, count=m)
+        rows = np.repeat(np.arange(m), lengths)
+        segs = np.fromiter((i for c in candidates for i in c), dtype=np.int64, count=rows.size)
+        a = self._a[segs]
+        d = self._d[segs]
+        l2 = self._len2[segs]
+        safe = np.where(l2 > 0, l2, 1.0)
+        t = np.clip(np.einsum("ij,ij->i", q[rows] - a, d) / safe, 0.0, 1.0)
+        t = np.where(l2 > 0, t, 0.0)
+        p = a + t[:, None] * d
+        d2 = np.einsum("ij,ij->i", q[rows] - p, q[rows] - p)
+        # Pick the minimum per query row (stable: lowest segment index wins ties).
+        order = np.lexsort((segs, d2, rows))
+        first = np.ones(order.size, dtype=bool)
+        first[1:] = rows[order][1:] != rows[order][:-1]
+        pick = order[first]
+        best_d2[rows[pick]] = d2[pick]
+        best_p[rows[pick]] = p[pick]
+        best_u[rows[pick]] = segs[pick] + t[pick]
+        return np.sqrt(best_d2), best_p, best_u
+
+    def distance(self, query_points: ArrayLike) -> FloatArray:
+        """Distances (M,) in metres from each query point to the polyline."""
+        return self.query(query_points)[0]
+
+
+def nearest_distances(points: ArrayLike, reference_points: ArrayLike) -> FloatArray:
+    """Distance (N,) from each point to the nearest of ``reference_points`` (a point set)."""
+    ref = np.asarray(reference_points, dtype=np.float64).reshape(-1, 3)
+    d, _ = cKDTree(ref).query(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+    return np.asarray(d, dtype=np.float64)
+
+
+# --------------------------------------------------------------------------- voxels
+
+
+def voxel_keys(points: ArrayLike, voxel_size: float) -> NDArray[np.int64]:
+    """Integer voxel indices (N, 3) of points for a grid of ``voxel_size`` metres at the origin."""
+    if voxel_size <= 0:
+        raise ValueError(f"voxel_size must be positive, got {voxel_size}")
+    return np.floor(np.asarray(points, dtype=np.float64) / voxel_size).astype(np.int64)
+
+
+def pack_voxel_keys(keys: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Pack (N, 3) voxel indices into one int64 each (21 bits per axis, ±1 M voxels).
+
+    At a 1 mm voxel that is ±1 km, far beyond any robot cell.
+    """
+    offset = np.int64(1 << 20)
+    k = np.asarray(keys, dtype=np.int64) + offset
+    if k.size and (k.min() < 0 or k.max() >= (1 << 21)):
+        raise ValueError("voxel index out of the packable range (±2^20)")
+    return (k[:, 0] << 42) | (k[:, 1] << 21) | k[:, 2]
+
+
+def unpack_voxel_keys(packed: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Inverse of :func:`pack_voxel_keys`: (N,) int64 → (N, 3) voxel indices."""
+    p = np.asarray(packed, dtype=np.int64)
+    mask = np.int64((1 << 21) - 1)
+    offset = np.int64(1 << 20)
+    return np.column_stack([(p >> 42) & mask, (p >> 21) & mask, p & mask]) - offset

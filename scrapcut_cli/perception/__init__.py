@@ -1,0 +1,1 @@
+"""Paint colour filter, back-projection, outlier removal, downsampling and stitching."""

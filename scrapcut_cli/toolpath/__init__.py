@@ -1,0 +1,1 @@
+"""Cutting set-points: normals, standoff, torch orientation, collision check, speeds, timing."""

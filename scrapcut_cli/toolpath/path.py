@@ -1,0 +1,55 @@
+"""The cutting path: torch set-points along the fitted curve."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+
+@dataclass(frozen=True, eq=False)
+class CuttingPath:
+    """Torch set-points in the base frame, ordered along the curve.
+
+    Attributes
+    ----------
+    positions : (N, 3) float64
+        Torch tip positions, metres: the surface point plus ``standoff_m`` along the normal.
+    orientations_xyzw : (N, 4) float64
+        Torch orientation; its z axis points into the surface (along −normal), x along the
+        curve tangent.
+    normals : (N, 3) float64
+        Unit surface normals at the set-points, pointing out of the surface (towards the camera
+        that observed it).
+    surface_points : (N, 3) float64
+        The points on the fitted curve the set-points stand off from.
+    arc_length : (N,) float64
+        Arc length along the curve, metres, from 0.
+    speed : (N,) float64
+        Torch travel speed, m/s.
+    time : (N,) float64
+        Time stamps, s, from the start of the pierce.
+    flags : list of list of str
+        Per set-point flags, e.g. ``["tilted"]`` or ``["collision"]``.
+    """
+
+    positions: NDArray[np.float64]
+    orientations_xyzw: NDArray[np.float64]
+    normals: NDArray[np.float64]
+    surface_points: NDArray[np.float64]
+    arc_length: NDArray[np.float64]
+    speed: NDArray[np.float64]
+    time: NDArray[np.float64]
+    flags: list[list[str]]
+    standoff_m: float
+    spacing_m: float
+    info: dict[str, object] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.positions)
+
+    @property
+    def flagged(self) -> int:
+        """Number of set-points carrying any flag."""
+        return sum(1 for f in self.flags if f)
