@@ -87,8 +87,8 @@ def interpolate_transform(T0: ArrayLike, T1: ArrayLike, alpha: float) -> FloatAr
 def rotation_angle(R_a: ArrayLike, R_b: ArrayLike) -> float:
     """Angle in radians of the rotation taking ``R_a`` to ``R_b`` (both (3, 3))."""
     R = np.asarray(R_a, dtype=np.float64).T @ np.asarray(R_b, dtype=np.float64)
-    c = (np.trace(R) - 1.0) / 2.0
-    return float(np.arccos(np.clip(c, -1.0, 1.0)))
+    # Rotation.magnitude goes through the quaternion: accurate near 0, unlike arccos of the trace.
+    return float(Rotation.from_matrix(R).magnitude())
 
 
 def look_at(eye: ArrayLike, target: ArrayLike, up_hint: ArrayLike = (0.0, 0.0, 1.0)) -> FloatArray:

@@ -1,0 +1,63 @@
+"""Tests of the configuration: defaults, TOML loading, overrides, errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from scrapcut_cli.config import ScrapcutConfig, config_from_dict, load_config
+from scrapcut_cli.errors import ConfigError
+
+
+def test_defaults_match_the_paper() -> None:
+    config = ScrapcutConfig()
+    assert config.nurbs.smoothness == 1.0
+    assert config.skeleton.leaf_size_m == pytest.approx(0.005)
+    assert config.toolpath.standoff_m == pytest.approx(0.008)
+    assert config.toolpath.spacing_m == pytest.approx(0.005)
+
+
+def test_toml_overrides_defaults_and_cli_overrides_toml(tmp_path: Path) -> None:
+    path = tmp_path / "c.toml"
+    path.write_text("[nurbs]\nsmoothness = 0.5\ndegree = 2\n[perception]\nsor_neighbors = 30\n")
+    config = load_config(path)
+    assert config.nurbs.smoothness == 0.5
+    assert config.nurbs.degree == 2
+    assert config.perception.sor_neighbors == 30
+    assert config.skeleton == ScrapcutConfig().skeleton
+    config = config.override("nurbs", smoothness=2.0, degree=None)
+    assert config.nurbs.smoothness == 2.0 and config.nurbs.degree == 2
+
+
+def test_int_is_accepted_for_float_fields_and_lists_become_tuples() -> None:
+    config = config_from_dict({"nurbs": {"smoothness": 1}, "paint": {"hsv": [10, 40, 0.6, 0.3]}})
+    assert isinstance(config.nurbs.smoothness, float)
+    assert config.paint.hsv == (10, 40, 0.6, 0.3)
+
+
+def test_round_trip_through_dict() -> None:
+    config = ScrapcutConfig().override("sim", object="i_beam", seed=7)
+    assert config_from_dict(config.to_dict()) == config
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("[nurbs]\nsmoothnes = 1.0\n", "unknown parameter nurbs.smoothnes"),
+        ("[nurb]\nsmoothness = 1.0\n", r"unknown section \[nurb\]"),
+        ("[nurbs]\nsmoothness = 'high'\n", "must be a number"),
+        ("[stitch]\nicp = 1\n", "true or false"),
+        ("[nurbs\n", "cannot read configuration"),
+    ],
+)
+def test_bad_files_name_the_problem(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=message):
+        load_config(path)
+
+
+def test_missing_file_is_a_config_error(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="not found"):
+        load_config(tmp_path / "nope.toml")
