@@ -31,3 +31,15 @@ def progress(unit: str = "frames") -> Progress:
         transient=True,
         disable=not err.is_terminal,
     )
+
+
+def print_table(table: object) -> None:
+    """Print a rich table on stdout at its natural width when the terminal (or a pipe's 80
+    columns) is narrower: a wrapped line is better than a cut topic name or figure."""
+    from rich.measure import Measurement
+
+    natural = Measurement.get(out, out.options.update_width(1000), table)  # type: ignore[arg-type]
+    if natural.maximum <= out.width:
+        out.print(table)
+    else:
+        Console(width=natural.maximum, highlight=False, soft_wrap=True).print(table)

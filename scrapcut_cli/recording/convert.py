@@ -1,0 +1,216 @@
+"""Convert a recording between MCAP, ROS 1 ``.bag`` and ROS 2 bag directories.
+
+Every topic is copied with its log times. Between ROS 2 flavours (MCAP and ROS 2 bags) the CDR
+bytes pass unchanged; to or from ROS 1 each message is deserialised and migrated field by field
+(rosbags' ``migrate_message``: ``k`` <-> ``K``, a header ``seq``), so ROS 1 tools see ROS 1
+messages. Metadata travels as MCAP metadata records, a ROS 2 bag's ``custom_data``, or a
+/scrapcut/metadata string on ROS 1. Output is written under a temporary name and renamed.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from scrapcut_cli._io import atomic_path
+from scrapcut_cli.errors import RecordingError
+from scrapcut_cli.recording import messages as m
+from scrapcut_cli.recording.reader import (
+    CUSTOM_DATA_PREFIX,
+    METADATA_TOPIC,
+    Recording,
+    open_recording,
+)
+from scrapcut_cli.recording.writer import McapWriter
+
+FORMATS = ("mcap", "ros1", "ros2")
+ROS2_STORAGES = ("mcap", "sqlite3")
+
+
+def format_for_path(path: str | os.PathLike[str]) -> str:
+    """The output format a path asks for: ``.mcap`` -> mcap, ``.bag`` -> ros1, else ros2."""
+    suffix = Path(path).suffix.lower()
+    return {".mcap": "mcap", ".bag": "ros1"}.get(suffix, "ros2")
+
+
+def convert_recording(
+    src: str | os.PathLike[str],
+    dst: str | os.PathLike[str],
+    *,
+    fmt: str | None = None,
+    storage: str = "mcap",
+) -> None:
+    """Write the recording ``src`` to ``dst`` as ``fmt`` (default: from ``dst``'s suffix).
+
+    ``storage`` picks the ROS 2 bag's storage plugin (``mcap`` or ``sqlite3``). ``dst`` is
+    replaced only when the conversion succeeds.
+    """
+    fmt = fmt or format_for_path(dst)
+    if fmt not in FORMATS:
+        raise RecordingError(f"unknown recording format {fmt!r}; known: {', '.join(FORMATS)}")
+    if storage not in ROS2_STORAGES:
+        raise RecordingError(
+            f"unknown ROS 2 storage {storage!r}; known: {', '.join(ROS2_STORAGES)}"
+        )
+    src_path, dst_path = Path(src), Path(dst)
+    if dst_path.exists() and src_path.exists() and dst_path.resolve() == src_path.resolve():
+        raise RecordingError(f"output {dst_path} is the input; choose another -o")
+    if fmt == "ros2" and dst_path.is_file():
+        raise RecordingError(f"{dst_path} is a file; a ROS 2 bag is a directory")
+    if fmt != "ros2" and dst_path.is_dir():
+        raise RecordingError(f"{dst_path} is a directory; an {fmt} recording is a file")
+    with open_recording(src_path) as rec:
+        translate = _Translator(rec, to_ros1=fmt == "ros1")
+        if fmt == "mcap":
+            _write_mcap(rec, dst_path, translate)
+        elif fmt == "ros2":
+            _write_ros2(rec, dst_path, translate, storage)
+        else:
+            _write_ros1(rec, dst_path, translate)
+
+
+class _Translator:
+    """Turns source message bytes into destination bytes and supplies destination types."""
+
+    def __init__(self, rec: Recording, *, to_ros1: bool) -> None:
+        from rosbags.typesys import Stores, get_typestore
+
+        self.rec = rec
+        self.src_store = rec.typestore
+        self.src_is_ros1 = rec.format == "ros1"
+        self.to_ros1 = to_ros1
+        self.migrate = self.src_is_ros1 != to_ros1
+        if not self.migrate:
+            self.store = self.src_store
+        else:
+            self.store = get_typestore(Stores.ROS1_NOETIC if to_ros1 else Stores.ROS2_HUMBLE)
+            # Types the destination store lacks (tf2_msgs in Noetic, custom messages) come
+            # from the source definitions; the Header stays the destination's own.
+            missing = {
+                name: fields
+                for name, fields in self.src_store.fielddefs.items()
+                if name not in self.store.fielddefs and name != "std_msgs/msg/Header"
+            }
+            if missing:
+                self.store.register(missing)
+        self._cache: dict[str, object] = {}
+        self._seq: dict[str, int] = {}
+
+    def __call__(self, topic: str, msgtype: str, raw: bytes) -> bytes:
+        if not self.migrate:
+            return raw
+        from rosbags.convert.converter import migrate_message
+
+        msg = self.rec.deserialize(raw, msgtype)
+        out: Any = migrate_message(self.src_store, self.store, msgtype, msgtype, self._cache, msg)
+        if self.to_ros1:
+            header = getattr(out, "header", None)
+            if header is not None and hasattr(header, "seq"):
+                self._seq[topic] = self._seq.get(topic, 0) + 1
+                header.seq = self._seq[topic]
+            return bytes(self.store.serialize_ros1(out, msgtype))
+        return bytes(self.store.serialize_cdr(out, msgtype, little_endian=True))
+
+
+def _copied(rec: Recording) -> Iterator[tuple[str, str, int, bytes]]:
+    """Every message except the ROS 1 metadata topic (metadata is re-emitted natively)."""
+    for conn, log_time, raw in _copied_with_connections(rec):
+        yield conn.topic, conn.msgtype, log_time, raw
+
+
+def _copied_with_connections(rec: Recording) -> Iterator[tuple[Any, int, bytes]]:
+    topics = [t.name for t in rec.topics() if t.name != METADATA_TOPIC]
+    return rec.raw_connection_messages(topics)
+
+
+def _write_mcap(rec: Recording, dst: Path, translate: _Translator) -> None:
+    msgdefs: dict[str, str] = {}
+    with McapWriter(dst) as writer:
+        for name, data in sorted(rec.metadata.items()):
+            writer.add_metadata(name, data)
+        for topic, msgtype, log_time, raw in _copied(rec):
+            if msgtype not in msgdefs:
+                msgdefs[msgtype] = m.msgdef_text(msgtype, translate.store)
+            writer.write_raw(
+                topic,
+                msgtype,
+                translate(topic, msgtype, raw),
+                log_time_ns=log_time,
+                msgdef=msgdefs[msgtype],
+            )
+
+
+def _write_ros2(rec: Recording, dst: Path, translate: _Translator, storage: str) -> None:
+    from rosbags.convert.converter import LATCH
+    from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
+
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    with atomic_path(dst, directory=True) as tmp:
+        # rosbags creates the bag directory itself and names the storage file after it:
+        # write tmp/<name>/ and lift its files into tmp, which is renamed onto dst.
+        bag = tmp / dst.name
+        try:
+            with Writer(bag, version=9, storage_plugin=plugin) as writer:
+                for name, data in sorted(rec.metadata.items()):
+                    writer.set_custom_data(CUSTOM_DATA_PREFIX + name, json.dumps(data))
+                connections: dict[str, Any] = {}
+                for topic, msgtype, log_time, raw in _copied(rec):
+                    conn = connections.get(topic)
+                    if conn is None:
+                        conn = writer.add_connection(
+                            topic,
+                            msgtype,
+                            typestore=translate.store,
+                            offered_qos_profiles=LATCH if topic == "/tf_static" else (),
+                        )
+                        connections[topic] = conn
+                    writer.write(conn, log_time, translate(topic, msgtype, raw))
+        except WriterError as exc:
+            raise RecordingError(f"cannot write ROS 2 bag {dst}: {exc}") from None
+        for item in bag.iterdir():
+            shutil.move(str(item), tmp / item.name)
+        bag.rmdir()
+
+
+def _write_ros1(rec: Recording, dst: Path, translate: _Translator) -> None:
+    from rosbags.interfaces import ConnectionExtRosbag1
+    from rosbags.rosbag1 import Writer, WriterError
+
+    with atomic_path(dst) as tmp:
+        tmp.unlink()  # rosbags refuses to overwrite; it creates the file itself
+        try:
+            with Writer(tmp) as writer:
+                connections: dict[tuple[str, str | None], Any] = {}
+                if rec.metadata:
+                    _write_ros1_metadata(writer, rec, translate)
+                for source, log_time, raw in _copied_with_connections(rec):
+                    topic, msgtype = source.topic, source.msgtype
+                    # A ROS 1 bag keeps one connection per publisher (two /tf_static nodes
+                    # must stay two latched connections); other formats do not know them.
+                    ext = source.ext
+                    callerid = ext.callerid if isinstance(ext, ConnectionExtRosbag1) else None
+                    key = (topic, callerid)
+                    conn = connections.get(key)
+                    if conn is None:
+                        conn = writer.add_connection(
+                            topic,
+                            msgtype,
+                            typestore=translate.store,
+                            callerid=key[1],
+                            latching=int(topic == "/tf_static"),
+                        )
+                        connections[key] = conn
+                    writer.write(conn, log_time, translate(topic, msgtype, raw))
+        except WriterError as exc:
+            raise RecordingError(f"cannot write ROS 1 bag {dst}: {exc}") from None
+
+
+def _write_ros1_metadata(writer: Any, rec: Recording, translate: _Translator) -> None:
+    conn = writer.add_connection(METADATA_TOPIC, m.STRING, typestore=translate.store, latching=1)
+    text = json.dumps(rec.metadata, sort_keys=True)
+    msg = translate.store.types[m.STRING](data=text)
+    writer.write(conn, rec.start_ns, bytes(translate.store.serialize_ros1(msg, m.STRING)))

@@ -1,0 +1,779 @@
+"""Read recordings: MCAP files, ROS 1 ``.bag`` files and ROS 2 bag directories, one code path.
+
+All three go through rosbags' ``AnyReader`` (it reads a bare ``.mcap`` as well as bag
+directories with MCAP or sqlite3 storage), which deserialises with the message definitions
+stored in the recording. On top of it:
+
+- a first pass reads /tf, /tf_static and only the header bytes of the colour and depth images
+  (stamp, frame id, size) to pair colour with depth by header stamp and pose each colour
+  stamp (:meth:`Recording.plan`) without decoding pixels;
+- a second pass streams the planned frames (:meth:`Recording.frames`), holding only the
+  images whose partner has not arrived yet.
+
+Header stamps, not log times, define frame times: real recorders log tens of ms late.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import os
+import struct
+from collections.abc import Generator, Iterable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from scrapcut_cli.config import RecordingConfig
+from scrapcut_cli.errors import RecordingError
+from scrapcut_cli.geometry import transform_points
+from scrapcut_cli.recording import messages as m
+from scrapcut_cli.recording.frame import CameraModel, Frame
+from scrapcut_cli.recording.tf import TfBuffer
+
+#: Default topics, first that exists wins (DESIGN.md: realsense-ros 4.x, then ROS 1 names).
+COLOR_TOPICS = (
+    "/camera/camera/color/image_raw",
+    "/camera/color/image_raw",
+    "/camera/camera/color/image_raw/compressed",
+    "/camera/color/image_raw/compressed",
+)
+DEPTH_TOPICS = (
+    "/camera/camera/aligned_depth_to_color/image_raw",
+    "/camera/aligned_depth_to_color/image_raw",
+    "/camera/camera/aligned_depth_to_color/image_raw/compressedDepth",
+    "/camera/aligned_depth_to_color/image_raw/compressedDepth",
+)
+INFO_TOPICS = ("/camera/camera/color/camera_info", "/camera/color/camera_info")
+REFERENCE_TOPIC = "/scrapcut/reference"
+EXPLORATION_TOPIC = "/scrapcut/exploration"
+#: ROS 1 bags have no metadata records; converted recordings keep theirs on this topic.
+METADATA_TOPIC = "/scrapcut/metadata"
+#: ROS 2 bag directories keep metadata in metadata.yaml's custom_data under this prefix.
+CUSTOM_DATA_PREFIX = "scrapcut.metadata."
+
+_MCAP_MAGIC = b"\x89MCAP0\r\n"
+_ROS1_MAGIC = b"#ROSBAG V2.0\n"
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+_KIND = {".mcap": "an MCAP file", ".bag": "a ROS 1 bag", ".db3": "a ROS 2 sqlite3 bag file"}
+
+
+@dataclass(frozen=True)
+class TopicInfo:
+    """One topic: its name, ROS 2 style message type and message count."""
+
+    name: str
+    msgtype: str
+    count: int
+
+
+@dataclass(frozen=True)
+class FramePlan:
+    """Which colour images become frames, decided from headers only.
+
+    Attributes
+    ----------
+    usable, skipped : int
+        Colour images that become frames / that do not.
+    skip_reasons : dict[str, int]
+        ``no_depth`` (no depth image within the sync tolerance), ``pose_out_of_range``
+        (the stamp lies outside the sampled TF time range); only reasons that occur.
+    unpaired_depth : int
+        Depth images no colour image was paired with.
+    stamps_ns : (usable,) int64
+        Colour header stamps of the usable frames, in recording order.
+    depth_stamps_ns : (usable,) int64
+        Header stamps of the depth images paired with them.
+    T_base_cam : (usable, 4, 4) float64
+        Camera poses at ``stamps_ns``, base frame.
+    color_index, depth_index : (usable,) int64
+        Position of each frame's colour / depth message on its topic.
+    """
+
+    usable: int
+    skipped: int
+    skip_reasons: dict[str, int]
+    unpaired_depth: int
+    stamps_ns: NDArray[np.int64]
+    depth_stamps_ns: NDArray[np.int64]
+    T_base_cam: NDArray[np.float64]
+    color_index: NDArray[np.int64]
+    depth_index: NDArray[np.int64]
+
+
+@dataclass
+class _ImageHeaders:
+    """Header stamps, frame ids and sizes of one image topic, in stream order."""
+
+    topic: str
+    stamps: list[int] = field(default_factory=list)
+    frame_id: str | None = None
+    size: tuple[int, int] | None = None
+
+
+def _reader_errors() -> tuple[type[BaseException], ...]:
+    """Exceptions rosbags (and the codecs under it) raise for damaged input."""
+    from rosbags.highlevel import AnyReaderError
+    from rosbags.rosbag1 import ReaderError as Reader1Error
+    from rosbags.rosbag2 import ReaderError as Reader2Error
+    from rosbags.serde import SerdeError
+    from rosbags.typesys import TypesysError
+
+    errors: list[type[BaseException]] = [
+        AnyReaderError,
+        Reader1Error,
+        Reader2Error,
+        SerdeError,
+        TypesysError,
+        struct.error,
+        EOFError,
+        OSError,
+        UnicodeDecodeError,
+    ]
+    try:
+        from backports.zstd import ZstdError
+
+        errors.append(ZstdError)
+    except ImportError:  # Python >= 3.14 ships compression.zstd
+        try:
+            from compression.zstd import ZstdError  # type: ignore[import-not-found,no-redef]
+
+            errors.append(ZstdError)
+        except ImportError:
+            pass
+    return tuple(errors)
+
+
+def detect_format(path: Path) -> str:
+    """``mcap``, ``ros1`` or ``ros2`` from the path's contents (not only its name)."""
+    if not path.exists():
+        raise RecordingError(f"recording not found: {path}")
+    if path.is_dir():
+        if (path / "metadata.yaml").is_file():
+            return "ros2"
+        raise RecordingError(f"{path} is a directory but not a ROS 2 bag (it has no metadata.yaml)")
+    try:
+        with path.open("rb") as f:
+            head = f.read(16)
+    except OSError as exc:
+        raise RecordingError(f"cannot read {path}: {exc.strerror}") from None
+    if head.startswith(_MCAP_MAGIC):
+        fmt, suffix = "mcap", ".mcap"
+    elif head.startswith(_ROS1_MAGIC):
+        fmt, suffix = "ros1", ".bag"
+    elif head.startswith(_SQLITE_MAGIC):
+        fmt, suffix = "ros2", ".db3"
+    else:
+        raise RecordingError(
+            f"{path} is not a recording (expected an MCAP file, a ROS 1 .bag or a ROS 2 bag "
+            "directory)"
+        )
+    if path.suffix != suffix:
+        # rosbags picks its storage reader by file name.
+        raise RecordingError(
+            f"{path} is {_KIND[suffix]} but is not named *{suffix}; rename it to "
+            f"{path.with_suffix(suffix).name}"
+        )
+    return fmt
+
+
+def open_recording(
+    path: str | os.PathLike[str], config: RecordingConfig | None = None
+) -> Recording:
+    """Open a recording for reading (a context manager; close it when done).
+
+    Only the index is read here; topics, camera and TF are resolved when first needed, so a
+    recording without camera topics still serves :meth:`Recording.reference`.
+    """
+    return Recording(Path(path), config or RecordingConfig())
+
+
+class Recording:
+    """An open recording. See the module docstring for what each pass reads."""
+
+    def __init__(self, path: Path, config: RecordingConfig) -> None:
+        from rosbags.highlevel import AnyReader
+
+        if path.name == "metadata.yaml" and path.is_file():
+            path = path.parent
+        self.path = path
+        self.config = config
+        self.format = detect_format(path)
+        self._errors = _reader_errors()
+        default_store = m.typestore()
+        try:
+            self._reader = AnyReader([path], default_typestore=default_store)
+            self._reader.open()
+        except self._errors as exc:
+            raise RecordingError(self._open_error(exc)) from None
+        self._connections: dict[str, list[Any]] = {}
+        for conn in self._reader.connections:
+            self._connections.setdefault(conn.topic, []).append(conn)
+        self._tf: TfBuffer | None = None
+        self._plan: FramePlan | None = None
+        self._headers: tuple[_ImageHeaders, _ImageHeaders] | None = None
+
+    def _open_error(self, exc: BaseException) -> str:
+        reason = str(exc).strip() or type(exc).__name__
+        if self.format == "mcap":
+            try:
+                with self.path.open("rb") as f:
+                    f.seek(-len(_MCAP_MAGIC), os.SEEK_END)
+                    tail = f.read()
+            except OSError:
+                tail = b""
+            if tail != _MCAP_MAGIC:
+                return (
+                    f"MCAP file {self.path} is truncated (no footer; the recorder was cut off); "
+                    "`mcap recover` can salvage its complete chunks"
+                )
+        return f"cannot read {self.format} recording {self.path}: {reason}"
+
+    # ------------------------------------------------------------------ lifecycle
+
+    def close(self) -> None:
+        if self._reader.stack is not None:
+            self._reader.close()
+
+    def __enter__(self) -> Recording:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ summary
+
+    def topics(self) -> list[TopicInfo]:
+        """Every topic with its type and message count, sorted by name."""
+        out = []
+        for name, conns in sorted(self._connections.items()):
+            types = sorted({c.msgtype for c in conns})
+            out.append(TopicInfo(name, " | ".join(types), sum(c.msgcount for c in conns)))
+        return out
+
+    @property
+    def duration_s(self) -> float:
+        """Seconds from the first to the last logged message."""
+        if not self._reader.message_count:
+            return 0.0
+        # rosbags reports end_time one past the last message.
+        return max(self._reader.end_time - 1 - self._reader.start_time, 0) / 1e9
+
+    @property
+    def start_ns(self) -> int:
+        """Log time of the first message (0 for an empty recording)."""
+        return int(self._reader.start_time) if self._reader.message_count else 0
+
+    @property
+    def typestore(self) -> Any:
+        """rosbags typestore built from the recording's own message definitions."""
+        return self._reader.typestore
+
+    @functools.cached_property
+    def metadata(self) -> dict[str, dict[str, str]]:
+        """Named string maps: MCAP metadata records, a ROS 2 bag's custom_data entries, or a
+        ROS 1 bag's /scrapcut/metadata topic (see :func:`convert_recording`)."""
+        out: dict[str, dict[str, str]] = {}
+        if self.format == "mcap":
+            out.update(self._mcap_metadata())
+        elif self.format == "ros2":
+            out.update(self._custom_data_metadata())
+        if METADATA_TOPIC in self._connections:
+            for _, _, msg in self.messages([METADATA_TOPIC]):
+                records = _json_object(str(msg.data), METADATA_TOPIC)
+                out.update({k: _string_map(v, METADATA_TOPIC) for k, v in records.items()})
+        return out
+
+    def _mcap_metadata(self) -> dict[str, dict[str, str]]:
+        from mcap.exceptions import McapError
+        from mcap.reader import make_reader
+
+        errors: tuple[type[BaseException], ...] = (McapError, *self._errors)
+        try:
+            with self.path.open("rb") as f:
+                return {md.name: dict(md.metadata) for md in make_reader(f).iter_metadata()}
+        except errors as exc:
+            raise RecordingError(f"cannot read the metadata of {self.path}: {exc}") from None
+
+    def _custom_data_metadata(self) -> dict[str, dict[str, str]]:
+        storage = getattr(self._reader.readers[0], "storage", None)
+        custom = getattr(getattr(storage, "metadata", None), "custom", None) or {}
+        out: dict[str, dict[str, str]] = {}
+        for key, value in custom.items():
+            if key.startswith(CUSTOM_DATA_PREFIX):
+                out[key[len(CUSTOM_DATA_PREFIX) :]] = _string_map(_json_object(value, key), key)
+        return out
+
+    def has_topic(self, topic: str) -> bool:
+        return topic in self._connections
+
+    # ------------------------------------------------------------------ topics
+
+    @functools.cached_property
+    def color_topic(self) -> str:
+        """The colour image topic (``--color-topic`` or the first default that exists)."""
+        return self._resolve("colour", self.config.color_topic, COLOR_TOPICS, "--color-topic")
+
+    @functools.cached_property
+    def depth_topic(self) -> str:
+        """The depth image topic, aligned to colour."""
+        return self._resolve("depth", self.config.depth_topic, DEPTH_TOPICS, "--depth-topic")
+
+    @functools.cached_property
+    def info_topic(self) -> str:
+        """The colour CameraInfo topic."""
+        return self._resolve("camera_info", self.config.info_topic, INFO_TOPICS, "--info-topic")
+
+    def _resolve(self, what: str, given: str | None, defaults: Sequence[str], option: str) -> str:
+        wanted = (m.CAMERA_INFO,) if what == "camera_info" else m.IMAGE_TYPES
+        if given is not None:
+            if given not in self._connections:
+                raise RecordingError(
+                    f"{what} topic {given} is not in {self.path.name}; "
+                    f"{self._candidates_text(wanted)}; pick one with {option}"
+                )
+            candidates = [given]
+        else:
+            candidates = [t for t in defaults if t in self._connections]
+            if not candidates:
+                raise RecordingError(
+                    f"no {what} topic in {self.path.name} (looked for {', '.join(defaults[:2])}); "
+                    f"{self._candidates_text(wanted)}; pick one with {option}"
+                )
+        topic = candidates[0]
+        types = {c.msgtype for c in self._connections[topic]}
+        if not types <= set(wanted):
+            raise RecordingError(
+                f"{what} topic {topic} carries {', '.join(sorted(types))}, not "
+                f"{' or '.join(wanted)}; pick another with {option}"
+            )
+        return topic
+
+    def _candidates_text(self, msgtypes: Sequence[str]) -> str:
+        found = [
+            name
+            for name, conns in sorted(self._connections.items())
+            if any(c.msgtype in msgtypes for c in conns)
+        ]
+        kind = "CameraInfo" if m.CAMERA_INFO in msgtypes else "image"
+        if not found:
+            return f"it has no {kind} topics at all"
+        return f"{kind} topics present: {', '.join(found)}"
+
+    def _conns(self, topics: Iterable[str]) -> list[Any]:
+        return [c for t in topics for c in self._connections.get(t, [])]
+
+    # ------------------------------------------------------------------ raw access
+
+    def raw_messages(
+        self, topics: Iterable[str] | None = None
+    ) -> Generator[tuple[str, str, int, bytes], None, None]:
+        """(topic, msgtype, log_time_ns, serialised bytes) in log-time order (all topics if
+        None); bytes are CDR for MCAP / ROS 2, ROS 1 serialisation for ``.bag``."""
+        for conn, log_time, raw in self.raw_connection_messages(topics):
+            yield conn.topic, conn.msgtype, log_time, raw
+
+    def raw_connection_messages(
+        self, topics: Iterable[str] | None = None
+    ) -> Generator[tuple[Any, int, bytes], None, None]:
+        """As :meth:`raw_messages`, with rosbags' Connection (publisher details) per message."""
+        conns = self._reader.connections if topics is None else self._conns(topics)
+        if not conns:
+            return
+        try:
+            for conn, log_time, raw in self._reader.messages(connections=conns):
+                yield conn, int(log_time), raw
+        except self._errors as exc:
+            raise RecordingError(f"damaged recording {self.path}: {exc}") from None
+
+    def deserialize(self, raw: bytes | memoryview, msgtype: str) -> Any:
+        """A message object from its bytes (ROS 1 field names for ``.bag`` recordings)."""
+        try:
+            return self._reader.deserialize(bytes(raw), msgtype)
+        except self._errors as exc:
+            raise RecordingError(f"cannot decode a {msgtype} message: {exc}") from None
+
+    def messages(self, topics: Iterable[str]) -> Iterator[tuple[str, int, Any]]:
+        """(topic, stamp_ns, message) for the given topics, in log-time order.
+
+        The stamp is the header stamp if the message has one, else the log time.
+        """
+        topics = list(topics)
+        missing = [t for t in topics if t not in self._connections]
+        if missing:
+            raise RecordingError(
+                f"topic {', '.join(missing)} not in {self.path.name}; topics: "
+                f"{', '.join(sorted(self._connections))}"
+            )
+        for topic, msgtype, log_time, raw in self.raw_messages(topics):
+            msg = self.deserialize(raw, msgtype)
+            stamp = m.message_stamp_ns(msg)
+            yield topic, log_time if stamp is None else stamp, msg
+
+    # ------------------------------------------------------------------ camera and TF
+
+    @functools.cached_property
+    def camera(self) -> CameraModel:
+        """Intrinsics from the first CameraInfo (size from the colour images if it has none)."""
+        topic = self.info_topic
+        first = self._first_raw(topic)
+        if first is None:
+            raise RecordingError(f"camera_info topic {topic} has no messages")
+        msg = self.deserialize(first[1], first[0])
+        if int(msg.width) and int(msg.height):
+            return m.camera_from_info(msg)
+        image = self._first_raw(self.color_topic)
+        size = None if image is None else m.raw_image_size(image[1], image[0], cdr=self._cdr)
+        if size is None:
+            raise RecordingError(
+                f"CameraInfo on {topic} has no image size and none can be read from "
+                f"{self.color_topic}"
+            )
+        return m.camera_from_info(msg, width=size[1], height=size[0])
+
+    def _first_raw(self, topic: str) -> tuple[str, bytes] | None:
+        """(msgtype, bytes) of the first message on ``topic``, reading no further."""
+        stream = self.raw_messages([topic])
+        try:
+            for _, msgtype, _, raw in stream:
+                return msgtype, raw
+        finally:
+            stream.close()
+        return None
+
+    @property
+    def _cdr(self) -> bool:
+        """Serialisation: CDR for MCAP and ROS 2, ROS 1's own for ``.bag``."""
+        return self.format != "ros1"
+
+    @property
+    def tf(self) -> TfBuffer:
+        """Every /tf and /tf_static transform of the recording."""
+        if self._tf is None:
+            self._index(with_images=False)
+        assert self._tf is not None
+        return self._tf
+
+    @property
+    def camera_frame(self) -> str:
+        """The colour images' header frame id (the optical frame)."""
+        headers = self._image_headers()[0]
+        if headers.frame_id is None:
+            raise RecordingError(f"colour topic {self.color_topic} has no messages")
+        return headers.frame_id
+
+    @functools.cached_property
+    def base_frame(self) -> str:
+        """``--base-frame`` or the root of the TF tree that holds the camera frame."""
+        if self.config.base_frame:
+            base = self.config.base_frame.lstrip("/")
+            if not self.tf.has_frame(base):
+                raise RecordingError(
+                    f"base frame {base!r} is not in the TF tree; TF frames: {_frames_text(self.tf)}"
+                )
+            return base
+        camera = self.camera_frame
+        if not self.tf.has_frame(camera):
+            raise RecordingError(
+                f"no TF path from image frame {camera!r} to a base frame: {camera!r} is not in "
+                f"/tf or /tf_static; TF frames: {_frames_text(self.tf)}"
+            )
+        return self.tf.root(camera)
+
+    def _image_headers(self) -> tuple[_ImageHeaders, _ImageHeaders]:
+        if self._headers is None:
+            self._index(with_images=True)
+        assert self._headers is not None
+        return self._headers
+
+    def _index(self, *, with_images: bool) -> None:
+        """One pass over TF (unless already read) and, if asked, the image headers."""
+        read_tf = self._tf is None
+        tf = TfBuffer() if read_tf else self._tf
+        assert tf is not None
+        tf_topics = {"/tf": False, "/tf_static": True} if read_tf else {}
+        topics = list(tf_topics)
+        color = depth = None
+        if with_images:
+            color, depth = _ImageHeaders(self.color_topic), _ImageHeaders(self.depth_topic)
+            if color.topic == depth.topic:
+                raise RecordingError(f"colour and depth topics are the same: {color.topic}")
+            topics += [color.topic, depth.topic]
+        image_headers = {h.topic: h for h in (color, depth) if h is not None}
+        for topic, msgtype, _, raw in self.raw_messages(topics):
+            if topic in tf_topics:
+                if msgtype in m.TF_TYPES:
+                    msg = self.deserialize(raw, msgtype)
+                    tf.add_transforms(m.tf_transforms(msg), static=tf_topics[topic])
+                continue
+            headers = image_headers[topic]
+            stamp, frame_id, _ = m.raw_header(raw, cdr=self._cdr)
+            headers.stamps.append(stamp)
+            if headers.frame_id is None:
+                headers.frame_id = frame_id.lstrip("/")
+            size = m.raw_image_size(raw, msgtype, cdr=self._cdr)
+            if headers.size is None:
+                headers.size = size
+            elif size is not None and size != headers.size:
+                raise RecordingError(
+                    f"image size changes on {topic}: {_size_text(headers.size)} then "
+                    f"{_size_text(size)}"
+                )
+        self._tf = tf
+        if color is not None and depth is not None:
+            if color.size and depth.size and color.size != depth.size:
+                raise RecordingError(
+                    f"colour images on {color.topic} are {_size_text(color.size)} but depth "
+                    f"images on {depth.topic} are {_size_text(depth.size)}; use the depth topic "
+                    "aligned to colour (--depth-topic)"
+                )
+            self._headers = (color, depth)
+
+    # ------------------------------------------------------------------ frames
+
+    def plan(self) -> FramePlan:
+        """Pair colour with depth and pose every colour stamp, from headers only."""
+        if self._plan is None:
+            self._plan = self._make_plan()
+        return self._plan
+
+    def _make_plan(self) -> FramePlan:
+        color, depth = self._image_headers()
+        if not color.stamps:
+            raise RecordingError(f"colour topic {color.topic} has no messages")
+        if not depth.stamps:
+            raise RecordingError(f"depth topic {depth.topic} has no messages")
+        camera = self.camera
+        if color.size is not None and color.size != (camera.height, camera.width):
+            raise RecordingError(
+                f"CameraInfo on {self.info_topic} is {camera.width}x{camera.height} but colour "
+                f"images on {color.topic} are {_size_text(color.size)}; pick the matching "
+                "--info-topic"
+            )
+        c = np.asarray(color.stamps, dtype=np.int64)
+        d = np.asarray(depth.stamps, dtype=np.int64)
+        tolerance = round(self.config.sync_tolerance_s * 1e9)
+        depth_index, paired = _pair_nearest(c, d, tolerance)
+
+        base, camera_frame = self.base_frame, self.camera_frame
+        T, in_range = self._poses(base, camera_frame, c[paired])
+        usable_color = np.flatnonzero(paired)[in_range]
+        reasons = {
+            "no_depth": int(np.count_nonzero(~paired)),
+            "pose_out_of_range": int(np.count_nonzero(~in_range)),
+        }
+        used_depth = depth_index[usable_color]
+        return FramePlan(
+            usable=len(usable_color),
+            skipped=len(c) - len(usable_color),
+            skip_reasons={k: v for k, v in reasons.items() if v},
+            unpaired_depth=len(d) - len(np.unique(depth_index[paired])),
+            stamps_ns=c[usable_color],
+            depth_stamps_ns=d[used_depth],
+            T_base_cam=T[in_range],
+            color_index=usable_color.astype(np.int64),
+            depth_index=used_depth.astype(np.int64),
+        )
+
+    def _poses(
+        self, base: str, camera_frame: str, stamps: NDArray[np.int64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        try:
+            return self.tf.lookup(base, camera_frame, stamps)
+        except RecordingError as exc:
+            raise RecordingError(
+                f"no TF path from image frame {camera_frame!r} to base frame {base!r}: {exc}"
+            ) from None
+
+    def frames(self) -> Iterator[Frame]:
+        """Stream exactly the planned frames, index 0 .. usable-1, in recording order.
+
+        Memory stays bounded: an image is held only until its partner arrives.
+        """
+        plan = self.plan()
+        if plan.usable == 0:
+            return
+        camera, base, camera_frame = self.camera, self.base_frame, self.camera_frame
+        color_topic, depth_topic = self.color_topic, self.depth_topic
+        frame_of_color = {int(ci): k for k, ci in enumerate(plan.color_index)}
+        depth_users: dict[int, int] = {}
+        for di in plan.depth_index:
+            depth_users[int(di)] = depth_users.get(int(di), 0) + 1
+        pending_color: dict[int, tuple[bytes, str]] = {}
+        pending_depth: dict[int, tuple[bytes, str]] = {}
+        next_frame = 0
+        n_color = n_depth = 0
+        for topic, msgtype, _, raw in self.raw_messages([color_topic, depth_topic]):
+            if topic == color_topic:
+                k = frame_of_color.get(n_color)
+                n_color += 1
+                if k is not None:
+                    pending_color[k] = (raw, msgtype)
+            else:
+                if n_depth in depth_users:
+                    pending_depth[n_depth] = (raw, msgtype)
+                n_depth += 1
+            while next_frame < plan.usable and next_frame in pending_color:
+                di = int(plan.depth_index[next_frame])
+                if di not in pending_depth:
+                    break
+                color_raw, color_type = pending_color.pop(next_frame)
+                depth_raw, depth_type = pending_depth[di]
+                depth_users[di] -= 1
+                if depth_users[di] == 0:
+                    del pending_depth[di]
+                yield Frame(
+                    index=next_frame,
+                    stamp_ns=int(plan.stamps_ns[next_frame]),
+                    color=m.decode_color(self.deserialize(color_raw, color_type), color_type),
+                    depth=self._checked_depth(
+                        m.decode_depth(self.deserialize(depth_raw, depth_type), depth_type),
+                        camera,
+                    ),
+                    camera=camera,
+                    T_base_cam=plan.T_base_cam[next_frame].copy(),
+                    base_frame=base,
+                    camera_frame=camera_frame,
+                    extras={"depth_stamp_ns": int(plan.depth_stamps_ns[next_frame])},
+                )
+                next_frame += 1
+        if next_frame != plan.usable:
+            raise RecordingError(
+                f"{self.path} changed while reading: {plan.usable} frames planned, "
+                f"{next_frame} read"
+            )
+
+    def _checked_depth(
+        self, depth: NDArray[np.float32], camera: CameraModel
+    ) -> NDArray[np.float32]:
+        if depth.shape != (camera.height, camera.width):
+            raise RecordingError(
+                f"depth image is {depth.shape[1]}x{depth.shape[0]} but the camera is "
+                f"{camera.width}x{camera.height}; use the depth topic aligned to colour"
+            )
+        return depth
+
+    # ------------------------------------------------------------------ simulator topics
+
+    def reference(self) -> NDArray[np.float64] | None:
+        """The painted reference curve (N, 3) float64, metres, base frame; None if absent.
+
+        Read from the last ``nav_msgs/Path`` on /scrapcut/reference; a path expressed in
+        another TF frame is transformed into the base frame (``--base-frame`` or its TF root).
+        """
+        if REFERENCE_TOPIC not in self._connections:
+            return None
+        last = None
+        for _, stamp, msg in self.messages([REFERENCE_TOPIC]):
+            last = (stamp, msg)
+        if last is None:
+            return None
+        stamp, msg = last
+        points = m.path_points(msg)
+        frame = m.frame_id_of(msg)
+        if not frame or not self.tf.has_frame(frame):
+            return points
+        base = (self.config.base_frame or "").lstrip("/") or self.tf.root(frame)
+        if base == frame:
+            return points
+        T = self.tf.lookup_one(base, frame, stamp)
+        return transform_points(T, points)
+
+    def exploration_log(self) -> list[dict[str, Any]]:
+        """The simulator's exploration steps: one JSON object per /scrapcut/exploration message."""
+        if EXPLORATION_TOPIC not in self._connections:
+            return []
+        steps = []
+        for _, _, msg in self.messages([EXPLORATION_TOPIC]):
+            try:
+                step = json.loads(str(msg.data))
+            except json.JSONDecodeError as exc:
+                raise RecordingError(f"{EXPLORATION_TOPIC} holds invalid JSON: {exc}") from None
+            if not isinstance(step, dict):
+                raise RecordingError(f"{EXPLORATION_TOPIC} messages must be JSON objects")
+            steps.append(step)
+        return steps
+
+
+def _pair_nearest(
+    color: NDArray[np.int64], depth: NDArray[np.int64], tolerance_ns: int
+) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+    """For each colour stamp the index of the nearest depth stamp, and whether it is within
+    ``tolerance_ns`` (ties go to the earlier depth image)."""
+    order = np.argsort(depth, kind="stable")
+    sorted_depth = depth[order]
+    right = np.clip(np.searchsorted(sorted_depth, color), 0, len(depth) - 1)
+    left = np.clip(right - 1, 0, len(depth) - 1)
+    d_left = np.abs(color - sorted_depth[left])
+    d_right = np.abs(sorted_depth[right] - color)
+    pick = np.where(d_left <= d_right, left, right)
+    gap = np.minimum(d_left, d_right)
+    return order[pick].astype(np.int64), gap <= tolerance_ns
+
+
+def _size_text(size: tuple[int, int]) -> str:
+    return f"{size[1]}x{size[0]}"
+
+
+def _frames_text(tf: TfBuffer) -> str:
+    frames = tf.frames
+    return ", ".join(frames) if frames else "(none: no /tf or /tf_static messages)"
+
+
+def _json_object(text: str, where: str) -> dict[str, Any]:
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise RecordingError(f"{where} holds invalid JSON: {exc}") from None
+    if not isinstance(data, dict):
+        raise RecordingError(f"{where} must hold a JSON object, got {type(data).__name__}")
+    return data
+
+
+def _string_map(value: Any, where: str) -> dict[str, str]:
+    if not isinstance(value, dict) or not all(isinstance(v, str) for v in value.values()):
+        raise RecordingError(f"metadata in {where} must map names to strings")
+    return {str(k): v for k, v in value.items()}
+
+
+def sha256_first_mib(path: str | os.PathLike[str]) -> str:
+    """SHA-256 (hex) of the first MiB of a recording file; of a bag directory's first storage
+    file (as metadata.yaml lists it)."""
+    p = Path(path)
+    if p.is_dir():
+        p = _first_storage_file(p)
+    digest = hashlib.sha256()
+    try:
+        with p.open("rb") as f:
+            digest.update(f.read(1 << 20))
+    except OSError as exc:
+        raise RecordingError(f"cannot read {p}: {exc.strerror}") from None
+    return digest.hexdigest()
+
+
+def _first_storage_file(directory: Path) -> Path:
+    # ros2 bag names its storage files <bag>_0, <bag>_1, ...: the first by split number.
+    files = [
+        f
+        for f in directory.iterdir()
+        if f.is_file() and f.name.endswith((".mcap", ".db3", ".mcap.zstd", ".db3.zstd"))
+    ]
+    if not files:
+        raise RecordingError(f"{directory} holds no bag storage file (.mcap or .db3)")
+    return min(files, key=_split_number)
+
+
+def _split_number(path: Path) -> tuple[int, str]:
+    stem = path.name.split(".")[0]
+    tail = stem.rsplit("_", 1)[-1]
+    return (int(tail) if tail.isdigit() else 1 << 30, path.name)

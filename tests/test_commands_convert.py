@@ -1,0 +1,63 @@
+"""``scrapcut convert``: format from the output name, frames kept, one-line errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from helpers import synthetic_scan, write_scan
+
+from scrapcut_cli.cli import cli
+from scrapcut_cli.recording.reader import open_recording
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("convert") / "scan.mcap"
+    write_scan(path, synthetic_scan(n_frames=4), "mcap")
+    return path
+
+
+@pytest.mark.parametrize(
+    ("output", "extra", "fmt"),
+    [
+        ("out.bag", [], "ros1"),
+        ("out_dir", [], "ros2"),
+        ("out_sqlite", ["--storage", "sqlite3"], "ros2"),
+        ("out.mcap", [], "mcap"),
+        ("looks_like.mcap", ["--format", "ros2"], "ros2"),  # --format beats the suffix
+    ],
+)
+def test_convert_and_read_back(
+    recording: Path, tmp_path: Path, output: str, extra: list[str], fmt: str
+) -> None:
+    target = tmp_path / output
+    result = CliRunner().invoke(cli, ["convert", str(recording), "-o", str(target), *extra])
+    assert result.exit_code == 0, result.output
+    assert f"wrote {target} ({fmt})" in result.stderr
+    with open_recording(recording) as a, open_recording(target) as b:
+        assert b.format == fmt
+        frames_a, frames_b = list(a.frames()), list(b.frames())
+        assert len(frames_a) == len(frames_b) == 2  # frame 2 lacks depth, 3 lacks a pose
+        for x, y in zip(frames_a, frames_b, strict=True):
+            np.testing.assert_array_equal(x.color, y.color)
+            np.testing.assert_array_equal(x.depth, y.depth)
+            np.testing.assert_allclose(x.T_base_cam, y.T_base_cam, atol=1e-12)
+
+
+def test_errors_are_one_line(recording: Path, tmp_path: Path) -> None:
+    runner = CliRunner()
+    missing = runner.invoke(cli, ["convert", str(tmp_path / "no.mcap"), "-o", "x.bag"])
+    assert missing.exit_code == 1
+    assert missing.stderr.strip() == f"scrapcut: error: recording not found: {tmp_path / 'no.mcap'}"
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(recording.read_bytes()[:3000])
+    truncated = runner.invoke(cli, ["convert", str(cut), "-o", str(tmp_path / "o.bag")])
+    assert truncated.exit_code == 1
+    assert len(truncated.stderr.strip().splitlines()) == 1
+    assert "truncated" in truncated.stderr and "Traceback" not in truncated.output
+    assert not (tmp_path / "o.bag").exists()
+    usage = runner.invoke(cli, ["convert", str(recording)])
+    assert usage.exit_code == 2  # -o is required

@@ -1,0 +1,190 @@
+"""``scrapcut info``: the fixed JSON keys, the tables, and one-line errors for bad input."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner, Result
+from helpers import (
+    SCAN_COLOR_TOPIC,
+    SCAN_DEPTH_TOPIC,
+    SCAN_INFO_TOPIC,
+    SyntheticScan,
+    synthetic_scan,
+    write_scan,
+)
+
+from scrapcut_cli.cli import cli
+from scrapcut_cli.recording.frame import CameraModel
+from scrapcut_cli.recording.writer import McapWriter
+
+
+@pytest.fixture(scope="module")
+def scan() -> SyntheticScan:
+    return synthetic_scan()
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory, scan: SyntheticScan) -> Path:
+    path = tmp_path_factory.mktemp("info") / "scan.mcap"
+    write_scan(path, scan, "mcap")
+    return path
+
+
+def _run(*args: str) -> Result:
+    return CliRunner().invoke(cli, ["info", *args])
+
+
+def test_json_has_the_fixed_keys(recording: Path, scan: SyntheticScan) -> None:
+    result = _run(str(recording), "--json")
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    fixed = {
+        "format",
+        "duration_s",
+        "topics",
+        "camera",
+        "frames",
+        "base_frame",
+        "camera_frame",
+        "has_reference",
+        "has_exploration_log",
+    }
+    assert fixed <= set(data)
+    assert data["format"] == "mcap"
+    assert data["duration_s"] == pytest.approx(0.7366666, abs=1e-6)
+    topics = {t["name"]: (t["type"], t["count"]) for t in data["topics"]}
+    assert topics[SCAN_COLOR_TOPIC] == ("sensor_msgs/msg/Image", 6)
+    assert all(set(t) >= {"name", "type", "count"} for t in data["topics"])
+    cam = scan.camera
+    assert {k: data["camera"][k] for k in ("width", "height", "fx", "fy", "cx", "cy")} == {
+        "width": cam.width,
+        "height": cam.height,
+        "fx": cam.fx,
+        "fy": cam.fy,
+        "cx": cam.cx,
+        "cy": cam.cy,
+    }
+    assert data["frames"] == {
+        "usable": 4,
+        "skipped": 2,
+        "skip_reasons": {"no_depth": 1, "pose_out_of_range": 1},
+        "unpaired_depth": 1,
+    }
+    assert (data["base_frame"], data["camera_frame"]) == (
+        "panda_link0",
+        "camera_color_optical_frame",
+    )
+    assert data["has_reference"] is True and data["has_exploration_log"] is True
+    assert data["metadata"] == {"scrapcut": {"object": "synthetic", "paint": "orange"}}
+
+
+def test_options_reach_the_reader(recording: Path) -> None:
+    result = _run(
+        str(recording), "--json", "--sync-tolerance-ms", "1", "--base-frame", "panda_hand"
+    )
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert data["frames"]["usable"] == 0
+    assert data["frames"]["skip_reasons"] == {"no_depth": 6}
+    assert data["base_frame"] == "panda_hand"
+
+
+def test_tables_name_every_topic_whole(recording: Path) -> None:
+    result = _run(str(recording))
+    assert result.exit_code == 0, result.output
+    for name in (SCAN_COLOR_TOPIC, SCAN_DEPTH_TOPIC, SCAN_INFO_TOPIC, "/tf_static"):
+        assert name in result.stdout
+    assert "4 usable, 2 skipped (no_depth 1, pose_out_of_range 1)" in result.stdout
+
+
+# --------------------------------------------------------------------------- bad input
+
+
+def _assert_one_line_error(result: Result, *fragments: str) -> None:
+    assert result.exit_code == 1, result.output
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("scrapcut: error: ")
+    for fragment in fragments:
+        assert fragment in lines[0]
+    assert "Traceback" not in result.output
+    assert result.stdout == ""
+
+
+def test_missing_path(tmp_path: Path) -> None:
+    _assert_one_line_error(_run(str(tmp_path / "absent.mcap")), "recording not found")
+
+
+def test_not_a_recording(tmp_path: Path) -> None:
+    path = tmp_path / "photo.mcap"
+    path.write_bytes(b"\xff\xd8\xff\xe0 not an mcap")
+    _assert_one_line_error(_run(str(path)), "is not a recording")
+
+
+def test_truncated_mcap(recording: Path, tmp_path: Path) -> None:
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(recording.read_bytes()[:5000])
+    _assert_one_line_error(_run(str(cut)), "truncated", "mcap recover")
+
+
+@pytest.mark.parametrize(
+    ("option", "topic", "expected"),
+    [
+        ("--color-topic", "/camera/missing", "image topics present:"),
+        ("--depth-topic", "/camera/missing", "image topics present:"),
+        ("--info-topic", "/camera/missing", "CameraInfo topics present: " + SCAN_INFO_TOPIC),
+    ],
+)
+def test_missing_topics(recording: Path, option: str, topic: str, expected: str) -> None:
+    _assert_one_line_error(
+        _run(str(recording), option, topic), f"topic {topic} is not in", expected, option
+    )
+
+
+def _tiny(path: Path, *, depth_shape: tuple[int, int] = (4, 6), frame: str = "cam") -> Path:
+    camera = CameraModel(6, 4, 5.0, 5.0, 2.5, 1.5, frame_id=frame)
+    with McapWriter(path) as writer:
+        writer.write_tf(
+            0, [("base", "flange", np.eye(4)), ("flange", "cam", np.eye(4))], static=True
+        )
+        writer.write_camera_info(SCAN_INFO_TOPIC, 5, camera)
+        writer.write_image(SCAN_COLOR_TOPIC, 5, frame, np.zeros((4, 6, 3), np.uint8))
+        writer.write_image(SCAN_DEPTH_TOPIC, 5, frame, np.ones(depth_shape, np.uint16))
+    return path
+
+
+def test_default_topics_missing(tmp_path: Path) -> None:
+    path = tmp_path / "left.mcap"
+    with McapWriter(path) as writer:
+        writer.write_image("/left/image_raw", 1, "cam", np.zeros((4, 6, 3), np.uint8))
+    _assert_one_line_error(
+        _run(str(path)), "no colour topic", "image topics present: /left/image_raw", "--color-topic"
+    )
+
+
+def test_no_tf_path(tmp_path: Path) -> None:
+    path = _tiny(tmp_path / "lost.mcap", frame="camera_optical")
+    _assert_one_line_error(_run(str(path)), "'camera_optical'", "TF frames: base, cam, flange")
+    _assert_one_line_error(
+        _run(str(_tiny(tmp_path / "ok.mcap")), "--base-frame", "world"),
+        "'world'",
+        "TF frames: base, cam, flange",
+    )
+
+
+def test_color_depth_size_mismatch(tmp_path: Path) -> None:
+    path = _tiny(tmp_path / "mismatch.mcap", depth_shape=(2, 3))
+    _assert_one_line_error(_run(str(path)), "6x4", "3x2", "--depth-topic")
+
+
+def test_a_good_tiny_recording_works(tmp_path: Path) -> None:
+    result = _run(str(_tiny(tmp_path / "ok.mcap")), "--json")
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert data["frames"]["usable"] == 1
+    assert data["base_frame"] == "base"
+    assert data["has_reference"] is False
