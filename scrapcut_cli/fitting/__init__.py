@@ -1,1 +1,120 @@
-"""Curve fitters: open NURBS and 3-D skeletonisation."""
+"""Curve fitters: open NURBS and 3-D skeletonisation.
+
+``fit_curve(points_base, method, config)`` runs the fitter named by ``method`` on a stitched
+paint cloud and returns a :class:`~scrapcut_cli.fitting.curve.Curve` running along the centre
+of the painted band. ``extrapolate_end`` gives the exploration planner the direction in which
+the line continues beyond one end of a fitted curve (the paper's Algorithm 1).
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from scrapcut_cli.config import ScrapcutConfig
+from scrapcut_cli.errors import FittingError
+from scrapcut_cli.fitting.curve import Curve, NurbsModel
+from scrapcut_cli.fitting.nurbs import fit_nurbs, nurbs_to_geomdl, nurbs_to_geomdl_json
+from scrapcut_cli.fitting.skeleton import fit_skeleton
+from scrapcut_cli.geometry import cumulative_length
+
+__all__ = [
+    "METHODS",
+    "Curve",
+    "NurbsModel",
+    "extrapolate_end",
+    "fit_curve",
+    "fit_nurbs",
+    "fit_skeleton",
+    "nurbs_to_geomdl",
+    "nurbs_to_geomdl_json",
+]
+
+METHODS = ("nurbs", "skeleton")
+
+#: Length of the chord that gives a NURBS curve's end direction.
+END_CHORD_M = 0.01
+
+
+def fit_curve(points_base: ArrayLike, method: str, config: ScrapcutConfig) -> Curve:
+    """Fit the curve of ``method`` ("nurbs" or "skeleton") to ``points_base`` (N, 3) float64,
+    metres, base frame, with that method's section of ``config``."""
+    if method == "nurbs":
+        return fit_nurbs(points_base, config=config.nurbs)
+    if method == "skeleton":
+        return fit_skeleton(points_base, config=config.skeleton)
+    raise FittingError(f"unknown fitting method {method!r}; known: {', '.join(METHODS)}")
+
+
+def extrapolate_end(
+    curve: Curve, end: Literal["start", "end"], *, step_m: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Where the line goes on beyond one end of ``curve``, as the paper's planner samples it.
+
+    The direction comes from two points near the end: for a NURBS curve, the model evaluated at
+    its end parameter and at the parameter ``END_CHORD_M`` (1 cm) of arc length inwards; for a
+    skeleton, its last two ordered skeleton vertices (``curve.info["skeleton_points"]``);
+    otherwise (or with fewer than two vertices) the polyline's own end chord.
+
+    Returns
+    -------
+    point : (3,) float64, metres, base frame
+        The curve's end moved ``step_m`` along ``direction``.
+    direction : (3,) float64
+        Unit vector pointing out of the curve at that end.
+    """
+    if end not in ("start", "end"):
+        raise ValueError(f"end must be 'start' or 'end', got {end!r}")
+    if step_m < 0:
+        raise ValueError(f"step_m must not be negative, got {step_m}")
+    if len(curve.points) < 2:
+        raise FittingError("cannot extrapolate a curve of fewer than two points")
+    at_start = end == "start"
+    tip = np.asarray(curve.points[0] if at_start else curve.points[-1], dtype=np.float64)
+    direction = _end_direction(curve, at_start)
+    return tip + step_m * direction, direction
+
+
+def _end_direction(curve: Curve, at_start: bool) -> NDArray[np.float64]:
+    if curve.nurbs is not None:
+        pair = _nurbs_end_pair(curve.nurbs, at_start)
+    else:
+        vertices = np.asarray(curve.info.get("skeleton_points", []), dtype=np.float64)
+        if vertices.ndim == 2 and len(vertices) >= 2:
+            pair = vertices[:2][::-1] if at_start else vertices[-2:]
+        else:
+            pair = _polyline_end_pair(curve.points, at_start)
+    d = pair[1] - pair[0]
+    n = float(np.linalg.norm(d))
+    if n <= 0.0:
+        pair = _polyline_end_pair(curve.points, at_start)
+        d = pair[1] - pair[0]
+        n = float(np.linalg.norm(d))
+    if n <= 0.0:
+        raise FittingError("cannot extrapolate a curve whose end points coincide")
+    return np.asarray(d / n)
+
+
+def _nurbs_end_pair(model: NurbsModel, at_start: bool) -> NDArray[np.float64]:
+    """(inner point, end point) of a NURBS, ``END_CHORD_M`` apart along the curve (or a
+    quarter of the curve if it is shorter)."""
+    lo, hi = model.domain
+    t = np.linspace(lo, hi, 2001)
+    if at_start:
+        t = t[::-1]
+    pts = model.evaluate(t)
+    s = cumulative_length(pts)
+    s = s[-1] - s  # arc length back from the end
+    reach = min(END_CHORD_M, 0.25 * float(s[0]))
+    inner = pts[int(np.clip(np.searchsorted(-s, -reach), 0, len(pts) - 1))]
+    return np.vstack([inner, pts[-1]])
+
+
+def _polyline_end_pair(points: NDArray[np.float64], at_start: bool) -> NDArray[np.float64]:
+    pts = points[::-1] if at_start else points
+    s = cumulative_length(pts)
+    reach = min(END_CHORD_M, 0.25 * float(s[-1]))
+    inner = pts[int(np.clip(np.searchsorted(s, s[-1] - reach) - 1, 0, len(pts) - 1))]
+    return np.vstack([inner, pts[-1]])

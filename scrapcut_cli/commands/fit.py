@@ -1,0 +1,295 @@
+"""``scrapcut fit``: fit the painted line of a recording and write the cutting path."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import click
+
+from scrapcut_cli.commands._options import (
+    build_config,
+    config_option,
+    paint_options,
+    recording_options,
+)
+
+METHODS = ("nurbs", "skeleton")
+
+
+def _mm(value: float | None) -> float | None:
+    return None if value is None else value / 1000.0
+
+
+@click.command("fit")
+@click.argument("recording", type=click.Path(path_type=Path))
+@click.option(
+    "--method",
+    type=click.Choice(METHODS),
+    default="nurbs",
+    show_default=True,
+    help="Curve fit: open NURBS or 3-D skeleton.",
+)
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="Path file to write (scrapcut.path/v1 JSON).",
+)
+@click.option("--csv", "write_csv", is_flag=True, help="Also write the set-points as PATH.csv.")
+@click.option(
+    "--mcap",
+    "write_mcap",
+    is_flag=True,
+    help="Also write PATH.mcap: curve, torch poses and stitched clouds for Foxglove.",
+)
+@click.option(
+    "--nurbs-json",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Also write the NURBS as geomdl JSON (--method nurbs).",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+@click.option(
+    "--leaf-size",
+    "leaf_size_mm",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=None,
+    help="Skeleton voxel (leaf) size [mm] (default 5, the paper's).",
+)
+@click.option(
+    "--smoothness",
+    type=click.FloatRange(min=0.0),
+    default=None,
+    help="NURBS smoothness weight w (default 1.0, the paper's).",
+)
+@click.option(
+    "--control-points",
+    type=click.IntRange(min=2),
+    default=None,
+    help="NURBS control points (default: scales with the curve length).",
+)
+@click.option("--degree", type=click.IntRange(1, 5), default=None, help="NURBS degree (default 3).")
+@click.option(
+    "--spacing-mm",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=None,
+    help="Set-point spacing along the curve [mm] (default 5).",
+)
+@click.option(
+    "--standoff-mm",
+    type=click.FloatRange(min=0.0),
+    default=None,
+    help="Torch tip distance from the surface [mm] (default 8).",
+)
+@click.option(
+    "--normal-radius-mm",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=None,
+    help="Surface neighbourhood for normals [mm] (default 15).",
+)
+@click.option(
+    "--material",
+    default=None,
+    help="Material key of the speed table (default mild_steel; a wrong name lists them).",
+)
+@click.option(
+    "--thickness-mm",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=None,
+    help="Plate thickness [mm] for the cutting speed (default 10).",
+)
+@click.option(
+    "--max-tilt-deg",
+    type=click.FloatRange(min=0.0, max=89.0),
+    default=None,
+    help="Largest torch tilt from the normal to avoid a collision [deg] (default 20).",
+)
+@click.option(
+    "--torch-length-mm",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=None,
+    help="Torch body length for the collision check [mm] (default 150).",
+)
+@click.option(
+    "--torch-radius-mm",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=None,
+    help="Torch body radius for the collision check [mm] (default 12).",
+)
+@click.option(
+    "--speed-table",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Cutting-speed CSV (default: the bundled oxy-fuel chart).",
+)
+@config_option
+@recording_options
+@paint_options
+def fit(
+    recording: Path,
+    method: str,
+    output: Path,
+    write_csv: bool,
+    write_mcap: bool,
+    nurbs_json: Path | None,
+    as_json: bool,
+    leaf_size_mm: float | None,
+    smoothness: float | None,
+    control_points: int | None,
+    degree: int | None,
+    spacing_mm: float | None,
+    standoff_mm: float | None,
+    normal_radius_mm: float | None,
+    material: str | None,
+    thickness_mm: float | None,
+    max_tilt_deg: float | None,
+    torch_length_mm: float | None,
+    torch_radius_mm: float | None,
+    speed_table: Path | None,
+    config_path: Path | None,
+    **shared: Any,
+) -> None:
+    """Fit the painted line of RECORDING and write the cutting path.
+
+    Reads the recording (MCAP, ROS 1 bag or ROS 2 bag directory), stitches the paint seen in
+    every frame, fits an open NURBS or a 3-D skeleton, and places torch set-points
+    perpendicular to the observed surface at the standoff, tilted where the torch would hit
+    the piece, timed by the material's cutting speed.
+    """
+    from scrapcut_cli.commands._console import err, progress
+    from scrapcut_cli.toolpath.pathfile import write_path_csv, write_path_file, write_path_mcap
+    from scrapcut_cli.toolpath.recipe import fit_recording
+
+    csv_path = output.with_suffix(".csv") if write_csv else None
+    mcap_path = output.with_suffix(".mcap") if write_mcap else None
+    extra = [p for p in (csv_path, mcap_path, nurbs_json) if p is not None]
+    for target in [output, *extra]:
+        if target.resolve() == recording.resolve():
+            raise click.UsageError(f"{target} would overwrite the recording; choose another -o")
+    if any(p.resolve() == output.resolve() for p in extra):
+        raise click.UsageError(f"-o {output} would be overwritten by an export; name it .json")
+    if nurbs_json is not None and method != "nurbs":
+        raise click.UsageError("--nurbs-json needs --method nurbs")
+
+    config = build_config(config_path, **shared)
+    config = config.override("skeleton", leaf_size_m=_mm(leaf_size_mm))
+    config = config.override(
+        "nurbs", smoothness=smoothness, control_points=control_points, degree=degree
+    )
+    config = config.override(
+        "toolpath",
+        spacing_m=_mm(spacing_mm),
+        standoff_m=_mm(standoff_mm),
+        normal_radius_m=_mm(normal_radius_mm),
+        material=material,
+        thickness_mm=thickness_mm,
+        max_tilt_deg=max_tilt_deg,
+        torch_length_m=_mm(torch_length_mm),
+        torch_radius_m=_mm(torch_radius_mm),
+        speed_table=None if speed_table is None else str(speed_table),
+    )
+
+    with progress("frames") as bar:
+        task = bar.add_task("stitching", total=None, status="")
+
+        def advance(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        result = fit_recording(recording, method=method, config=config, progress=advance)
+
+    write_path_file(output, result.to_path_dict())
+    written = [output]
+    if csv_path is not None:
+        write_path_csv(result.path, csv_path)
+        written.append(csv_path)
+    if mcap_path is not None:
+        write_path_mcap(
+            mcap_path,
+            result.curve,
+            result.path,
+            frame_id=result.frame_id,
+            paint_points=result.stitch.paint_points,
+            surface_points=result.stitch.surface_points,
+            stamp_ns=result.stamp_ns,
+        )
+        written.append(mcap_path)
+    if nurbs_json is not None:
+        from scrapcut_cli._io import write_text_atomic
+        from scrapcut_cli.fitting.nurbs import nurbs_to_geomdl_json
+
+        assert result.curve.nurbs is not None  # --method nurbs
+        write_text_atomic(nurbs_json, nurbs_to_geomdl_json(result.curve.nurbs))
+        written.append(nurbs_json)
+
+    summary = result.summary()
+    summary["outputs"] = [str(p) for p in written]
+    if as_json:
+        click.echo(json.dumps(summary, indent=2))
+    else:
+        _render(summary)
+    if summary["flagged"]:
+        err.print(
+            f"[yellow]note:[/] {summary['flagged']} set-point(s) flagged "
+            f"(tilted {summary['tilted']}, collision {summary['collision']}, "
+            f"no surface {summary['no_surface']}); see 'flags' in {output}"
+        )
+
+
+def _render(summary: dict[str, Any]) -> None:
+    from rich.table import Table
+
+    from scrapcut_cli.commands._console import out
+
+    table = Table(title=f"scrapcut fit — {summary['method']}", show_header=False)
+    table.add_column("", style="bold")
+    table.add_column("")
+    params = summary["method_params"]
+    method = summary["method"]
+    if method == "skeleton":
+        method += f" (leaf {1000 * params['leaf_size_m']:g} mm)"
+    reasons = ", ".join(f"{k} {v}" for k, v in summary["skip_reasons"].items())
+    time_s = summary["time_s"]
+    rows = [
+        ("recording", summary["recording"]),
+        ("method", method),
+        ("paint", summary["paint"]),
+        (
+            "frames used / skipped",
+            f"{summary['frames_used']} / {summary['frames_skipped']}"
+            + (f" ({reasons})" if reasons else ""),
+        ),
+        (
+            "stitched points",
+            f"{summary['paint_points']} paint, {summary['surface_points']} surface",
+        ),
+        ("curve length", f"{1000 * summary['curve_length_m']:.1f} mm"),
+        (
+            "fit residual",
+            f"{1000 * summary['fit_rms_m']:.2f} mm RMS, {1000 * summary['fit_max_m']:.2f} mm max "
+            "(stitched paint to curve)",
+        ),
+        ("set-points", str(summary["setpoints"])),
+        (
+            "flagged",
+            f"{summary['flagged']} (tilted {summary['tilted']}, collision "
+            f"{summary['collision']}, no surface {summary['no_surface']})",
+        ),
+        (
+            "cutting",
+            f"{summary['material']} {summary['thickness_mm']:g} mm: "
+            f"{60000 * summary['speed_m_s']:.0f} mm/min, pierce {summary['pierce_s']:.1f} s, "
+            f"total {summary['cut_time_s']:.1f} s",
+        ),
+        (
+            "time",
+            f"{time_s['total']:.2f} s (read+stitch {time_s['read_stitch']:.2f}, "
+            f"fit {time_s['fit']:.3f}, tool path {time_s['toolpath']:.3f})",
+        ),
+        ("written", ", ".join(summary["outputs"])),
+    ]
+    for key, value in rows:
+        table.add_row(key, value)
+    out.print(table)

@@ -1,0 +1,140 @@
+"""Order an unordered curve-like cloud: positions along it, from one end to the other.
+
+A principal axis orders the points of a nearly straight line, but folds an arc around a pipe or
+a U back onto itself. Here the cloud is reduced to voxel centroids, joined by their minimum
+spanning tree (which bridges gaps by their shortest crossing), and the tree's longest path
+(its diameter) is the chain from one end of the line to the other. scipy's csgraph does the
+graph work; the centroid reduction keeps the dense distance matrix small.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra, minimum_spanning_tree
+from scipy.spatial.distance import pdist, squareform
+
+from scrapcut_cli.fitting._common import arc_positions, moving_average
+from scrapcut_cli.geometry import cumulative_length
+
+FloatArray = NDArray[np.float64]
+
+
+def voxel_centroids(
+    points: FloatArray, voxel_m: float
+) -> tuple[FloatArray, NDArray[np.int64], NDArray[np.int64]]:
+    """Centroids (K, 3) of the occupied voxels, point counts (K,), and each point's voxel (N,).
+
+    Voxels are numbered in the order of their packed integer keys (x, then y, then z)."""
+    keys = np.floor(points / voxel_m).astype(np.int64)
+    keys -= keys.min(axis=0)
+    span = keys.max(axis=0) + 1
+    packed = (keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2]
+    _, inverse, counts = np.unique(packed, return_inverse=True, return_counts=True)
+    sums = np.column_stack(
+        [np.bincount(inverse, weights=points[:, k], minlength=len(counts)) for k in range(3)]
+    )
+    return sums / counts[:, None], counts.astype(np.int64), inverse.astype(np.int64)
+
+
+def tree_diameter(tree: object, *, start: int = 0) -> NDArray[np.int64]:
+    """Node indices along the longest path of a weighted tree (sparse (K, K), either triangle).
+
+    Two Dijkstra sweeps: the farthest node from any node is an end of a longest path, and the
+    farthest node from that end is the other end. On a forest, the tree holding ``start``. On a
+    graph with cycles the same sweeps give the shortest path between two nodes (nearly) the
+    farthest apart.
+    """
+    d0 = dijkstra(tree, directed=False, indices=start)
+    a = int(np.argmax(np.where(np.isfinite(d0), d0, -1.0)))
+    da, pred = dijkstra(tree, directed=False, indices=a, return_predecessors=True)
+    b = int(np.argmax(np.where(np.isfinite(da), da, -1.0)))
+    path = [b]
+    while path[-1] != a:
+        path.append(int(pred[path[-1]]))
+    return np.asarray(path[::-1], dtype=np.int64)
+
+
+def geodesic_positions(
+    points: FloatArray, *, voxel_m: float = 0.01, max_nodes: int = 250, neighbours: int = 8
+) -> tuple[FloatArray, float]:
+    """Each point's position (N,) along a curve-like cloud (N, 3), metres from one end, and the
+    cloud's length.
+
+    Voxel centroids are linked by their minimum spanning tree (which bridges gaps by their
+    shortest crossing) plus links to each centroid's nearest neighbours no longer than 2.5
+    typical tree edges (a longer one could jump between two turns of a helix or the arms of a
+    U). Geodesic distances over that graph from one end (the node farthest from an arbitrary
+    one) grow steadily along the cloud. The centroids are then averaged in slices of that
+    distance, one voxel thick, into a chain down the middle of the cloud, and every point's
+    position is the arc length of its projection on the chain: points across a wide band get
+    the same position, which geodesic distances alone would not give them. Voxels holding
+    fewer than a tenth of the median count (stray points) take no part. The voxel grows by 1.5x
+    until at most ``max_nodes`` remain, keeping the dense distance matrix small.
+    """
+    size = float(voxel_m)
+    while True:
+        centroids, counts, _ = voxel_centroids(points, size)
+        keep = counts >= max(1.0, 0.1 * float(np.median(counts)))
+        if int(keep.sum()) <= max_nodes:
+            break
+        size *= 1.5
+    nodes, weight = centroids[keep], counts[keep].astype(np.float64)
+    if len(nodes) < 3:
+        return _principal_positions(points)
+    distances = squareform(pdist(nodes))
+    tree = minimum_spanning_tree(distances)
+    typical = float(np.median(tree.data))
+    k = min(neighbours, len(nodes) - 1)
+    near = np.argpartition(distances, k, axis=1)[:, : k + 1].ravel()  # self included
+    rows = np.repeat(np.arange(len(nodes)), k + 1)
+    short = (distances[rows, near] <= 2.5 * typical) & (rows != near)
+    links = csr_matrix(
+        (distances[rows[short], near[short]], (rows[short], near[short])), shape=distances.shape
+    )
+    # Element-wise maximum: an edge both in the tree and among the links keeps its length
+    # (a sum would double it).
+    graph = links.maximum(tree)
+    d0 = dijkstra(graph, directed=False, indices=0)
+    end = int(np.argmax(np.where(np.isfinite(d0), d0, -1.0)))
+    along = dijkstra(graph, directed=False, indices=end)
+    if not np.isfinite(along).all() or float(along.max()) <= 0.0:
+        return _principal_positions(points)
+    chain = _slab_chain(nodes, along, weight, size)
+    if len(chain) < 2:
+        return _principal_positions(points)
+    # Slices of geodesic distance lean across a wide band (the far side is farther from the
+    # end), so the chain zig-zags a little; slicing the points again across the chain itself
+    # straightens it.
+    position = _positions_on(chain, points)
+    chain = _slab_chain(points, position, np.ones(len(points)), size)
+    if len(chain) < 2:
+        return _principal_positions(points)
+    position = _positions_on(chain, points)
+    return position, float(cumulative_length(chain)[-1])
+
+
+def _slab_chain(
+    points: FloatArray, along: FloatArray, weight: FloatArray, size: float
+) -> FloatArray:
+    """Weighted centroids (K, 3) of the points in slices ``size`` thick of ``along``, in order,
+    smoothed by a three-vertex moving average. Slices holding less than a tenth of the median
+    slice (stray points beyond an end) are left out."""
+    slab = np.floor((along - along.min()) / size).astype(np.int64)
+    total = np.bincount(slab, weights=weight)
+    filled = total >= 0.1 * float(np.median(total[total > 0]))
+    sums = np.column_stack([np.bincount(slab, weights=weight * points[:, j]) for j in range(3)])
+    return moving_average(sums[filled] / total[filled][:, None], 3)
+
+
+def _positions_on(chain: FloatArray, points: FloatArray) -> FloatArray:
+    """Arc length (N,) of each point's projection on the chain (K, 3)."""
+    return arc_positions(chain, points, step=0.001)[1]
+
+
+def _principal_positions(points: FloatArray) -> tuple[FloatArray, float]:
+    centre = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - centre, full_matrices=False)
+    proj = (points - centre) @ vt[0]
+    return proj - proj.min(), float(np.ptp(proj))

@@ -1,0 +1,353 @@
+"""The path file (``scrapcut.path/v1`` JSON, DESIGN.md) and its CSV export.
+
+Fixed keys are the ones DESIGN.md lists; this module adds ``curve.spacing_m``, ``curve.info``,
+``path.summary`` and a per-set-point ``surface_point`` (all optional when reading). Floats are
+written with Python's shortest round-trip repr, so a file read back gives the same numbers.
+
+A set-point's ``flags`` are empty or name what the operator should look at: ``tilted`` (the
+perpendicular torch would hit the observed piece; the pose is tilted within the bound and the
+speed lowered for the longer cut), ``collision`` (no tilt within the bound is free; the pose
+stays perpendicular), ``no_surface`` (too little observed surface around it, e.g. a gap in a
+wire mesh; the normal is interpolated along the path). Time stamps ``t_s`` start at the pierce
+time: the torch dwells at the first set-point from 0 to ``t_s[0]``.
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime
+import json
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from scrapcut_cli import __version__
+from scrapcut_cli._io import atomic_path, write_text_atomic
+from scrapcut_cli.errors import ToolpathError
+from scrapcut_cli.fitting.curve import Curve, NurbsModel
+from scrapcut_cli.geometry import polyline_length, quat_xyzw_to_matrix
+from scrapcut_cli.toolpath.path import CuttingPath
+
+SCHEMA = "scrapcut.path/v1"
+CSV_COLUMNS = ("s", "x", "y", "z", "qx", "qy", "qz", "qw", "nx", "ny", "nz", "speed_m_s", "t_s")
+#: Arrays in ``info`` dictionaries longer than this are left out of the file (e.g. a skeleton's
+#: vertices): the file keeps diagnostics, not intermediate data.
+MAX_INFO_ARRAY = 16
+
+
+def path_to_dict(
+    curve: Curve,
+    path: CuttingPath,
+    *,
+    source: Mapping[str, Any],
+    method_params: Mapping[str, Any],
+    config: Mapping[str, Any],
+    frame_id: str,
+    created: str | None = None,
+) -> dict[str, Any]:
+    """The path file as a JSON-ready dictionary.
+
+    ``source``: path, sha256_first_mib, frames_used, frames_skipped of the recording.
+    ``config``: every parameter used (``ScrapcutConfig.to_dict()``). ``created``: ISO-8601
+    time stamp; default now (UTC) — pass a fixed one for byte-identical files.
+    """
+    if created is None:
+        created = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+    setpoints = [
+        {
+            "s": float(path.arc_length[i]),
+            "position": _floats(path.positions[i]),
+            "orientation_xyzw": _floats(path.orientations_xyzw[i]),
+            "normal": _floats(path.normals[i]),
+            "speed_m_s": float(path.speed[i]),
+            "t_s": float(path.time[i]),
+            "flags": [str(f) for f in path.flags[i]],
+            "surface_point": _floats(path.surface_points[i]),
+        }
+        for i in range(len(path))
+    ]
+    return {
+        "schema": SCHEMA,
+        "tool_version": __version__,
+        "created": created,
+        "source": _jsonable(dict(source)),
+        "frame_id": frame_id,
+        "units": "m",
+        "method": {"name": curve.method, "params": _jsonable(dict(method_params))},
+        "curve": {
+            "points": [_floats(p) for p in curve.points],
+            "nurbs": None if curve.nurbs is None else curve.nurbs.to_dict(),
+            "spacing_m": float(curve.spacing_m),
+            "length_m": float(curve.length),
+            "info": _jsonable(dict(curve.info)),
+        },
+        "path": {
+            "standoff_m": float(path.standoff_m),
+            "spacing_m": float(path.spacing_m),
+            "setpoints": setpoints,
+            "summary": _jsonable(dict(path.info)),
+        },
+        "config": _jsonable(dict(config)),
+    }
+
+
+def path_from_dict(data: Any) -> tuple[Curve, CuttingPath, dict[str, Any]]:
+    """Curve, cutting path and the rest (schema, source, method, config...) of a path file.
+
+    Validates the schema name, the fixed keys, array shapes and finiteness; raises ToolpathError
+    naming the first bad key.
+    """
+    if not isinstance(data, dict):
+        raise ToolpathError("path file: expected a JSON object at the top level")
+    schema = data.get("schema")
+    if schema != SCHEMA:
+        raise ToolpathError(f"path file: schema is {schema!r}, this scrapcut reads {SCHEMA!r}")
+    for key in ("source", "frame_id", "units", "method", "curve", "path"):
+        if key not in data:
+            raise ToolpathError(f"path file: missing key {key!r}")
+    if data["units"] != "m":
+        raise ToolpathError(f"path file: units must be 'm', got {data['units']!r}")
+    method = _get(data, "method", dict)
+    name = _get(method, "name", str, where="method")
+    curve_d = _get(data, "curve", dict)
+    points = _array(curve_d.get("points"), 3, "curve.points")
+    if len(points) == 0:
+        raise ToolpathError("path file: curve.points is empty")
+    nurbs = None
+    if curve_d.get("nurbs") is not None:
+        try:
+            nurbs = NurbsModel.from_dict(curve_d["nurbs"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ToolpathError(f"path file: bad curve.nurbs ({exc})") from None
+    spacing = curve_d.get("spacing_m")
+    if spacing is None:
+        spacing = polyline_length(points) / max(len(points) - 1, 1)
+    curve_info = curve_d.get("info") or {}
+    curve = Curve(
+        points=points,
+        method=name,
+        nurbs=nurbs,
+        spacing_m=_number(spacing, "curve.spacing_m"),
+        info=dict(curve_info) if isinstance(curve_info, dict) else {},
+    )
+
+    path_d = _get(data, "path", dict)
+    standoff = _number(path_d.get("standoff_m"), "path.standoff_m")
+    path_spacing = _number(path_d.get("spacing_m"), "path.spacing_m")
+    setpoints = _get(path_d, "setpoints", list, where="path")
+    for i, sp in enumerate(setpoints):
+        if not isinstance(sp, dict):
+            raise ToolpathError(f"path file: path.setpoints[{i}] must be an object")
+        for key in ("s", "position", "orientation_xyzw", "normal", "speed_m_s", "t_s", "flags"):
+            if key not in sp:
+                raise ToolpathError(f"path file: path.setpoints[{i}] lacks {key!r}")
+
+    def column(key: str, width: int) -> NDArray[np.float64]:
+        return _array([sp[key] for sp in setpoints], width, f"path.setpoints[*].{key}")
+
+    positions = column("position", 3)
+    orientations = column("orientation_xyzw", 4)
+    norms = np.linalg.norm(orientations, axis=1)
+    if np.any(np.abs(norms - 1.0) > 1e-6):
+        i = int(np.argmax(np.abs(norms - 1.0)))
+        raise ToolpathError(
+            f"path file: path.setpoints[{i}].orientation_xyzw is not a unit quaternion"
+        )
+    normals = column("normal", 3)
+    scalars = _array(
+        [[sp["s"], sp["speed_m_s"], sp["t_s"]] for sp in setpoints], 3, "setpoint s/speed/t"
+    )
+    flags: list[list[str]] = []
+    for i, sp in enumerate(setpoints):
+        f = sp["flags"]
+        if not isinstance(f, list) or not all(isinstance(x, str) for x in f):
+            raise ToolpathError(f"path file: path.setpoints[{i}].flags must be a list of strings")
+        flags.append(list(f))
+    if all("surface_point" in sp for sp in setpoints):
+        surface_points = column("surface_point", 3)
+    else:
+        # The jet hits the surface standoff metres along the torch z axis from the tip.
+        z_axes = quat_xyzw_to_matrix(orientations)[:, :, 2] if len(setpoints) else positions
+        surface_points = positions + standoff * z_axes
+    summary = path_d.get("summary") or {}
+    path = CuttingPath(
+        positions=positions,
+        orientations_xyzw=orientations,
+        normals=normals,
+        surface_points=surface_points,
+        arc_length=scalars[:, 0].copy(),
+        speed=scalars[:, 1].copy(),
+        time=scalars[:, 2].copy(),
+        flags=flags,
+        standoff_m=standoff,
+        spacing_m=path_spacing,
+        info=dict(summary) if isinstance(summary, dict) else {},
+    )
+    meta = {k: v for k, v in data.items() if k not in ("curve", "path")}
+    return curve, path, meta
+
+
+def write_path_file(target: str | Path, data: Mapping[str, Any]) -> None:
+    """Write a path dictionary as JSON, atomically (NaN/inf refused)."""
+    try:
+        text = json.dumps(data, indent=1, allow_nan=False)
+    except ValueError as exc:
+        raise ToolpathError(f"path file: {exc}") from None
+    write_text_atomic(target, text + "\n")
+
+
+def read_path_file(source: str | Path) -> tuple[Curve, CuttingPath, dict[str, Any]]:
+    """Read and validate a path file (see :func:`path_from_dict`)."""
+    source = Path(source)
+    try:
+        data = json.loads(source.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ToolpathError(f"path file not found: {source}") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ToolpathError(f"cannot read path file {source}: {exc}") from None
+    try:
+        return path_from_dict(data)
+    except ToolpathError as exc:
+        raise ToolpathError(f"{source}: {exc}") from None
+
+
+def write_path_csv(path: CuttingPath, out: str | Path) -> None:
+    """One row per set-point: ``s,x,y,z,qx,qy,qz,qw,nx,ny,nz,speed_m_s,t_s`` (SI units)."""
+    table = np.column_stack(
+        [
+            path.arc_length,
+            path.positions,
+            path.orientations_xyzw,
+            path.normals,
+            path.speed,
+            path.time,
+        ]
+    )
+    with atomic_path(out) as tmp, tmp.open("w", newline="", encoding="utf-8") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(CSV_COLUMNS)
+        writer.writerows([repr(float(v)) for v in row] for row in table)
+
+
+#: Topics of the MCAP export (base frame), laid out for Foxglove's 3D panel.
+MCAP_TOPICS = {
+    "curve": "/scrapcut/curve",  # nav_msgs/Path: the fitted curve on the surface
+    "torch": "/scrapcut/torch_poses",  # geometry_msgs/PoseArray: every set-point's torch pose
+    "flagged": "/scrapcut/flagged_poses",  # geometry_msgs/PoseArray: tilted / colliding ones
+    "paint": "/scrapcut/cloud/paint",  # sensor_msgs/PointCloud2: stitched paint
+    "surface": "/scrapcut/cloud/surface",  # sensor_msgs/PointCloud2: stitched surface band
+}
+PAINT_RGB = (255, 110, 0)
+SURFACE_RGB = (150, 150, 150)
+
+
+def write_path_mcap(
+    target: str | Path,
+    curve: Curve,
+    path: CuttingPath,
+    *,
+    frame_id: str,
+    paint_points: NDArray[np.float64],
+    surface_points: NDArray[np.float64],
+    stamp_ns: int = 0,
+) -> None:
+    """The path for Foxglove: curve, torch poses and the stitched clouds in one MCAP (atomic).
+
+    ``paint_points`` (N, 3) and ``surface_points`` (M, 3) are metres in ``frame_id``; every
+    message carries ``stamp_ns`` (e.g. the recording's last frame) so the file is reproducible.
+    """
+    from scrapcut_cli.recording.writer import McapWriter
+
+    flagged = np.array([bool(f) for f in path.flags], dtype=bool)
+    with McapWriter(target) as writer:
+        writer.write_path(MCAP_TOPICS["curve"], stamp_ns, frame_id, curve.points)
+        writer.write_pose_array(
+            MCAP_TOPICS["torch"], stamp_ns, frame_id, path.positions, path.orientations_xyzw
+        )
+        writer.write_pose_array(
+            MCAP_TOPICS["flagged"],
+            stamp_ns,
+            frame_id,
+            path.positions[flagged],
+            path.orientations_xyzw[flagged],
+        )
+        for key, points, rgb in (
+            ("paint", paint_points, PAINT_RGB),
+            ("surface", surface_points, SURFACE_RGB),
+        ):
+            pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+            colours = np.tile(np.array(rgb, dtype=np.uint8), (len(pts), 1))
+            writer.write_pointcloud(MCAP_TOPICS[key], stamp_ns, frame_id, pts, colours)
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _floats(values: Sequence[float] | NDArray[np.float64]) -> list[float]:
+    return [float(v) for v in values]
+
+
+def _jsonable(value: Any) -> Any:
+    """JSON-safe copy of diagnostics: numpy scalars to Python, small arrays to lists,
+    large arrays and non-finite floats left out (None)."""
+    if isinstance(value, dict):
+        out = {}
+        for k, v in value.items():
+            converted = _jsonable(v)
+            if converted is not _DROP:
+                out[str(k)] = converted
+        return out
+    if isinstance(value, np.ndarray):
+        if value.size > MAX_INFO_ARRAY:
+            return _DROP
+        return _jsonable(value.tolist())
+    if isinstance(value, list | tuple):
+        if len(value) > MAX_INFO_ARRAY and not all(isinstance(v, str) for v in value):
+            return _DROP
+        return [v for v in (_jsonable(v) for v in value) if v is not _DROP]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if value is None or isinstance(value, str | bool | int | float):
+        return value
+    if isinstance(value, Path):
+        return str(value)
+    return _DROP
+
+
+_DROP = object()
+
+
+def _get(data: dict[str, Any], key: str, kind: type, *, where: str = "") -> Any:
+    name = f"{where}.{key}" if where else key
+    if key not in data:
+        raise ToolpathError(f"path file: missing key {name!r}")
+    value = data[key]
+    if not isinstance(value, kind):
+        raise ToolpathError(f"path file: {name} must be a {kind.__name__}")
+    return value
+
+
+def _number(value: Any, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ToolpathError(f"path file: {name} must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _array(values: Any, width: int, name: str) -> NDArray[np.float64]:
+    try:
+        arr = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ToolpathError(f"path file: {name} must be rows of {width} numbers") from None
+    if arr.size == 0:
+        return np.zeros((0, width))
+    if arr.ndim != 2 or arr.shape[1] != width:
+        raise ToolpathError(f"path file: {name} must be rows of {width} numbers")
+    if not np.all(np.isfinite(arr)):
+        raise ToolpathError(f"path file: {name} contains NaN or infinite values")
+    return arr

@@ -1,0 +1,295 @@
+"""What ``scrapcut fit`` does, as one function: recording → stitched clouds → curve → path.
+
+:func:`fit_recording` reads a recording (through :mod:`scrapcut_cli.recording`), stitches its
+paint and surface (:func:`~scrapcut_cli.perception.stitch.stitch_recording`), fits the curve
+(:func:`~scrapcut_cli.fitting.fit_curve`) and makes the cutting path
+(:func:`~scrapcut_cli.toolpath.setpoints.make_cutting_path`). It returns a :class:`FitResult`
+that knows how to become a path file. The two halves, :func:`stitch_recording_file` and
+:func:`fit_stitched`, let a caller fit several methods to one stitched recording. Nothing here
+prints; ``scrapcut fit`` renders the result.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from scrapcut_cli.config import ScrapcutConfig
+from scrapcut_cli.errors import ToolpathError
+from scrapcut_cli.fitting.curve import Curve
+from scrapcut_cli.geometry import PolylineDistance
+from scrapcut_cli.toolpath.path import CuttingPath
+from scrapcut_cli.toolpath.pathfile import path_to_dict
+from scrapcut_cli.toolpath.setpoints import make_cutting_path
+from scrapcut_cli.toolpath.speeds import SpeedTable, load_speed_table
+
+if TYPE_CHECKING:
+    from scrapcut_cli.perception.stitch import StitchResult
+
+METHODS = ("nurbs", "skeleton")
+
+
+@dataclass(frozen=True, eq=False)
+class FitResult:
+    """Everything one fit produced, with what it was made from.
+
+    Attributes
+    ----------
+    curve, path : Curve, CuttingPath
+        The fitted curve and the torch set-points (base frame).
+    stitch : StitchResult
+        The stitched paint and surface clouds and per-frame counts.
+    method : str
+        ``nurbs`` or ``skeleton``.
+    source : dict
+        ``path``, ``sha256_first_mib``, ``frames_used``, ``frames_skipped`` (path file "source").
+    frame_id : str
+        The base frame of every coordinate.
+    config : ScrapcutConfig
+        Every parameter used.
+    frames_read : int
+        Frames the reader delivered (paired, posed); ``reader_skipped`` more were skipped.
+    stamp_ns : int
+        Stamp of the last frame (exports are stamped with it).
+    timings_s : dict
+        Wall time of ``read_stitch``, ``fit``, ``toolpath`` and ``total``, seconds.
+    """
+
+    curve: Curve
+    path: CuttingPath
+    stitch: StitchResult
+    method: str
+    source: dict[str, Any]
+    frame_id: str
+    config: ScrapcutConfig
+    frames_read: int
+    reader_skipped: int
+    reader_skip_reasons: dict[str, int] = field(default_factory=dict)
+    stamp_ns: int = 0
+    timings_s: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def method_params(self) -> dict[str, Any]:
+        """The fitting method's parameters (its config section)."""
+        return dataclasses.asdict(getattr(self.config, self.method))
+
+    def residual_m(self) -> tuple[float, float]:
+        """(RMS, max) distance in metres of the stitched paint to the curve polyline.
+
+        The same measure for both methods; it includes the paint band's own half width.
+        """
+        d = PolylineDistance(self.curve.points).distance(self.stitch.paint_points)
+        return float(np.sqrt(np.mean(d * d))), float(d.max())
+
+    def to_path_dict(self, *, created: str | None = None) -> dict[str, Any]:
+        """The ``scrapcut.path/v1`` dictionary (see :func:`~.pathfile.path_to_dict`)."""
+        return path_to_dict(
+            self.curve,
+            self.path,
+            source=self.source,
+            method_params=self.method_params,
+            config=self.config.to_dict(),
+            frame_id=self.frame_id,
+            created=created,
+        )
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready figures for the summary table and ``--json``."""
+        rms, worst = self.residual_m()
+        info = self.path.info
+        tally = self.stitch.tally
+        perception_skips = dict(self.stitch.skip_reasons)
+        reasons = dict(self.reader_skip_reasons)
+        for reason, count in perception_skips.items():
+            reasons[reason] = reasons.get(reason, 0) + count
+        return {
+            "recording": self.source["path"],
+            "method": self.method,
+            "method_params": self.method_params,
+            "frame_id": self.frame_id,
+            "frames_used": self.source["frames_used"],
+            "frames_skipped": self.source["frames_skipped"],
+            "skip_reasons": dict(sorted(reasons.items())),
+            "frames_read": self.frames_read,
+            "paint": tally.hsv.describe(),
+            "paint_points": len(self.stitch.paint_points),
+            "surface_points": len(self.stitch.surface_points),
+            "curve_length_m": float(self.curve.length),
+            "curve_points": len(self.curve.points),
+            "setpoints": len(self.path),
+            "flagged": self.path.flagged,
+            "tilted": info.get("tilted", 0),
+            "collision": info.get("collision", 0),
+            "no_surface": info.get("no_surface", 0),
+            "fit_rms_m": rms,
+            "fit_max_m": worst,
+            "fitter_info": _scalars(self.curve.info),
+            "material": info.get("material"),
+            "thickness_mm": info.get("thickness_mm"),
+            "speed_m_s": info.get("speed_m_s"),
+            "pierce_s": info.get("pierce_s"),
+            "cut_time_s": info.get("cut_time_s"),
+            "time_s": dict(self.timings_s),
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class StitchedRecording:
+    """A recording's stitched clouds with where they came from (fit several methods on one).
+
+    ``source`` is the path file's "source" block; ``frame_id`` the base frame; ``reader_*``
+    count the frames the reader skipped (unpaired, pose out of range) and why.
+    """
+
+    stitch: StitchResult
+    source: dict[str, Any]
+    frame_id: str
+    reader_skipped: int
+    reader_skip_reasons: dict[str, int]
+    stamp_ns: int
+    time_s: float
+
+
+def stitch_recording_file(
+    recording: str | os.PathLike[str],
+    *,
+    config: ScrapcutConfig,
+    progress: Callable[[int, int], None] | None = None,
+) -> StitchedRecording:
+    """Read a recording and stitch its paint and surface clouds.
+
+    The paint defaults to the recording's own (simulator metadata) unless ``config.paint`` was
+    set. ``progress(frames_done, frames_total)`` is called after each frame.
+    """
+    from scrapcut_cli.perception.paint import resolve_recording_paint
+    from scrapcut_cli.perception.stitch import stitch_recording
+    from scrapcut_cli.recording.reader import open_recording, sha256_first_mib
+
+    t0 = time.perf_counter()
+    path = Path(recording)
+    with open_recording(path, config.recording) as rec:
+        plan = rec.plan()
+        hsv = resolve_recording_paint(config.paint, rec.metadata)
+        frame_id = rec.base_frame
+        done = 0
+
+        def step(_: object) -> None:
+            nonlocal done
+            done += 1
+            if progress is not None:
+                progress(done, plan.usable)
+
+        stitch = stitch_recording(rec.frames(), hsv, config, progress=step)
+    tally = stitch.tally
+    source = {
+        "path": str(path),
+        "sha256_first_mib": sha256_first_mib(path),
+        "frames_used": int(tally.frames_with_paint),
+        "frames_skipped": int(plan.skipped + tally.frames - tally.frames_with_paint),
+    }
+    return StitchedRecording(
+        stitch=stitch,
+        source=source,
+        frame_id=frame_id,
+        reader_skipped=int(plan.skipped),
+        reader_skip_reasons=dict(plan.skip_reasons),
+        stamp_ns=max((s.stamp_ns for s in stitch.steps), default=0),
+        time_s=time.perf_counter() - t0,
+    )
+
+
+def fit_stitched(
+    stitched: StitchedRecording,
+    *,
+    method: str,
+    config: ScrapcutConfig,
+    speeds: SpeedTable | None = None,
+) -> FitResult:
+    """Fit the curve to stitched paint and make the cutting path on the stitched surface."""
+    from scrapcut_cli.fitting import fit_curve
+
+    if method not in METHODS:
+        raise ToolpathError(f"unknown fitting method {method!r}; known: {', '.join(METHODS)}")
+    stitch = stitched.stitch
+    if speeds is None:
+        speeds = load_speed_table(config.toolpath.speed_table)
+    t0 = time.perf_counter()
+    curve = fit_curve(stitch.paint_points, method, config)
+    t1 = time.perf_counter()
+    # Paint lies on the surface too: both clouds give normals and both can hit the torch.
+    surface = np.vstack([stitch.surface_points, stitch.paint_points])
+    viewpoints = np.vstack([stitch.surface_viewpoints, stitch.paint_viewpoints])
+    cutting = make_cutting_path(curve, surface, viewpoints, config=config.toolpath, speeds=speeds)
+    t2 = time.perf_counter()
+    return FitResult(
+        curve=curve,
+        path=cutting,
+        stitch=stitch,
+        method=method,
+        source=dict(stitched.source),
+        frame_id=stitched.frame_id,
+        config=config,
+        frames_read=int(stitch.tally.frames),
+        reader_skipped=stitched.reader_skipped,
+        reader_skip_reasons=dict(stitched.reader_skip_reasons),
+        stamp_ns=stitched.stamp_ns,
+        timings_s={
+            "read_stitch": stitched.time_s,
+            "fit": t1 - t0,
+            "toolpath": t2 - t1,
+            "total": stitched.time_s + (t2 - t0),
+        },
+    )
+
+
+def fit_recording(
+    recording: str | os.PathLike[str],
+    *,
+    method: str,
+    config: ScrapcutConfig,
+    speeds: SpeedTable | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> FitResult:
+    """Fit the painted line of a recording and make its cutting path (``scrapcut fit``).
+
+    Parameters
+    ----------
+    recording : path
+        An ``.mcap`` file, a ROS 1 ``.bag`` or a ROS 2 bag directory.
+    method : str
+        ``nurbs`` or ``skeleton``.
+    config : ScrapcutConfig
+        Every stage's parameters.
+    speeds : SpeedTable, optional
+        Cutting chart (default: ``config.toolpath.speed_table`` or the bundled one).
+    progress : callable, optional
+        ``progress(frames_done, frames_total)`` after each frame.
+
+    Raises
+    ------
+    ScrapcutError
+        RecordingError, PerceptionError (no paint), FittingError (e.g. the skeleton broke into
+        pieces) or ToolpathError, each with one line for the user.
+    """
+    if method not in METHODS:
+        raise ToolpathError(f"unknown fitting method {method!r}; known: {', '.join(METHODS)}")
+    stitched = stitch_recording_file(recording, config=config, progress=progress)
+    return fit_stitched(stitched, method=method, config=config, speeds=speeds)
+
+
+def _scalars(info: dict[str, Any]) -> dict[str, Any]:
+    """The plain numbers, strings and flags of a diagnostics dictionary."""
+    out: dict[str, Any] = {}
+    for key, value in info.items():
+        if isinstance(value, np.generic):
+            value = value.item()
+        if isinstance(value, str | bool | int | float):
+            out[str(key)] = value
+    return out

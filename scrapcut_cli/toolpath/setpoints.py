@@ -1,0 +1,298 @@
+"""From a fitted curve and the observed surface to torch set-points: the tool-path recipe.
+
+The paper: "collision free set-points at a desired cutting distance, where the cutting torch is
+always perpendicular to the object surface", converted to a trajectory by speed limits from a
+look-up table of the scrap's properties. :func:`make_cutting_path` does it in this order:
+
+1. set-points every ``spacing_m`` of arc length along the curve (the spacing is adjusted to
+   divide the length evenly, within half a spacing over the whole curve);
+2. surface normals from the observed surface around each set-point
+   (:mod:`~scrapcut_cli.toolpath.normals`: face-aware local planes, a coarser radius where the
+   surface is rough such as a wire mesh), gaps filled along the path, edge-aware smoothing,
+   then made perpendicular to the curve's tangent (the curve lies on the surface);
+3. torch axes: the normal, tilted within ``max_tilt_deg`` where the torch body would hit the
+   observed cloud (:mod:`~scrapcut_cli.toolpath.collision`);
+4. torch poses: z into the surface (−axis), x along the curve tangent, tip at
+   surface point + standoff · axis;
+5. speeds and time stamps from the cutting chart (:mod:`~scrapcut_cli.toolpath.speeds`), with
+   the pierce dwell at the start.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from scrapcut_cli.config import ToolpathConfig
+from scrapcut_cli.errors import ToolpathError
+from scrapcut_cli.fitting.curve import Curve
+from scrapcut_cli.geometry import cumulative_length, interpolate_polyline, matrix_to_quat_xyzw
+from scrapcut_cli.toolpath.collision import choose_torch_axes
+from scrapcut_cli.toolpath.normals import (
+    estimate_path_normals,
+    fill_unsupported,
+    smooth_along_path,
+)
+from scrapcut_cli.toolpath.path import CuttingPath
+from scrapcut_cli.toolpath.speeds import SpeedTable, load_speed_table
+
+FloatArray = NDArray[np.float64]
+
+#: Flags a set-point can carry (path file ``flags``).
+FLAG_TILTED = "tilted"  # the perpendicular torch collided; a tilted one is free
+FLAG_COLLISION = "collision"  # no torch axis within the tilt bound is free
+FLAG_NO_SURFACE = "no_surface"  # too few surface points around it; normal interpolated
+
+
+def make_cutting_path(
+    curve: Curve,
+    surface_base: ArrayLike,
+    surface_viewpoints: ArrayLike,
+    *,
+    config: ToolpathConfig,
+    speeds: SpeedTable | None = None,
+) -> CuttingPath:
+    """Torch set-points along ``curve``, perpendicular to the observed surface.
+
+    Parameters
+    ----------
+    curve : Curve
+        The fitted curve; ``curve.points`` (K, 3) float64, metres, base frame, on the surface.
+    surface_base : (M, 3) float64, metres, base frame
+        The observed surface for normals and collisions: the stitched surface band plus the
+        stitched paint (paint lies on the surface too).
+    surface_viewpoints : (M, 3) float64, metres, base frame
+        Camera centre that observed each surface point; normals are oriented towards it.
+    config : ToolpathConfig
+        Spacing, standoff, normal radius, torch body, tilt bound, material and thickness.
+    speeds : SpeedTable, optional
+        Cutting chart; default ``config.speed_table`` or the bundled oxy-fuel table.
+
+    Returns
+    -------
+    CuttingPath
+        Set-points ordered along the curve; ``info`` counts flags and holds the timing figures.
+    """
+    _check_config(config)
+    surface = _points(surface_base, "surface_base")
+    viewpoints = _points(surface_viewpoints, "surface_viewpoints")
+    if len(surface) != len(viewpoints):
+        raise ToolpathError(
+            f"{len(surface)} surface points but {len(viewpoints)} viewpoints; one per point needed"
+        )
+    if len(surface) == 0:
+        raise ToolpathError("the surface cloud is empty: no normals or collisions can be computed")
+    if speeds is None:
+        speeds = load_speed_table(config.speed_table)
+    # Look the material up first: a typo should fail before any geometry is computed.
+    speed_m_s, pierce_s = speeds.lookup(config.material, config.thickness_mm)
+
+    arc, surface_points, tangents = sample_setpoints(curve.points, config.spacing_m)
+
+    estimate = estimate_path_normals(
+        surface_points,
+        surface,
+        viewpoints,
+        radius_m=config.normal_radius_m,
+        coarse_radius_m=config.coarse_normal_radius_m,
+        min_points=config.min_surface_points,
+    )
+    if not estimate.supported.any():
+        nearest = float(np.min(np.linalg.norm(surface[:, None] - surface_points[None, :1], axis=2)))
+        raise ToolpathError(
+            f"no surface points within {config.normal_radius_m * 1000:g} mm of the curve "
+            f"(nearest {nearest * 1000:.0f} mm from its start); are curve and surface in the "
+            f"same frame? try a larger normal radius"
+        )
+    normals = fill_unsupported(arc, estimate.normals, estimate.supported)
+    normals = smooth_along_path(
+        arc, normals, sigma_m=config.normal_smoothing_m, edge_angle_deg=config.edge_angle_deg
+    )
+    normals = perpendicular_to(normals, tangents)
+
+    torch = choose_torch_axes(
+        surface_points,
+        normals,
+        tangents,
+        surface,
+        standoff_m=config.standoff_m,
+        length_m=config.torch_length_m,
+        radius_m=config.torch_radius_m,
+        max_tilt_deg=config.max_tilt_deg,
+        tilt_steps=config.tilt_steps,
+        directions=config.tilt_directions,
+        min_points=config.collision_min_points,
+    )
+    positions = surface_points + config.standoff_m * torch.axes
+    orientations = matrix_to_quat_xyzw(torch_rotations(torch.axes, tangents))
+
+    speed, time = cutting_times(
+        arc, torch.tilt_rad, speeds, material=config.material, thickness_mm=config.thickness_mm
+    )
+
+    flags: list[list[str]] = [[] for _ in range(len(arc))]
+    for mask, name in (
+        (~estimate.supported, FLAG_NO_SURFACE),
+        (torch.tilted, FLAG_TILTED),
+        (torch.colliding, FLAG_COLLISION),
+    ):
+        for i in np.flatnonzero(mask):
+            flags[i].append(name)
+
+    chart = speeds.chart(config.material)
+    info: dict[str, object] = {
+        "setpoints": len(arc),
+        "length_m": float(arc[-1]),
+        "spacing_actual_m": float(arc[1] - arc[0]) if len(arc) > 1 else 0.0,
+        "tilted": int(torch.tilted.sum()),
+        "collision": int(torch.colliding.sum()),
+        "no_surface": int((~estimate.supported).sum()),
+        "line_normals": int(estimate.line_like.sum()),
+        "coarse_normals": int(estimate.coarse.sum()),
+        "max_tilt_used_deg": float(np.degrees(torch.tilt_rad.max())),
+        "material": config.material,
+        "fuel": chart.fuel,
+        "thickness_mm": float(config.thickness_mm),
+        "speed_m_s": speed_m_s,
+        "pierce_s": pierce_s,
+        "cut_time_s": float(time[-1]),
+        "speed_table": speeds.source,
+    }
+    return CuttingPath(
+        positions=positions,
+        orientations_xyzw=orientations,
+        normals=normals,
+        surface_points=surface_points,
+        arc_length=arc,
+        speed=speed,
+        time=time,
+        flags=flags,
+        standoff_m=float(config.standoff_m),
+        spacing_m=float(config.spacing_m),
+        info=info,
+    )
+
+
+def sample_setpoints(
+    curve_points: ArrayLike, spacing_m: float
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Set-point arc lengths (N,), points (N, 3) and unit tangents (N, 3) along a polyline.
+
+    ``curve_points`` : (K, 3) float64, metres, ordered. The number of intervals is the length
+    divided by ``spacing_m``, rounded, so the actual spacing is within half a spacing spread
+    over the whole curve (within 5 % once the curve is 10 spacings long). Tangents are
+    differences over ± one spacing, so the fitted polyline's small kinks do not jitter them.
+    """
+    pts = _points(curve_points, "curve points")
+    s = cumulative_length(pts)
+    if len(pts) < 2 or s[-1] <= 0:
+        raise ToolpathError("the fitted curve has no length: nothing to cut")
+    total = float(s[-1])
+    intervals = max(round(total / spacing_m), 1)
+    arc = np.linspace(0.0, total, intervals + 1)
+    points = interpolate_polyline(pts, arc, cumulative=s)
+    # Second-order differences: central inside, one-sided (3 points) at the ends, so the end
+    # tangents of a turning curve are not a chord's half-step behind.
+    derivative = np.gradient(points, arc, axis=0, edge_order=2 if len(arc) > 2 else 1)
+    tangents = derivative / np.maximum(np.linalg.norm(derivative, axis=1, keepdims=True), 1e-12)
+    return arc, points, tangents
+
+
+def perpendicular_to(normals: FloatArray, tangents: FloatArray) -> FloatArray:
+    """Unit normals (N, 3) with their component along the unit tangents (N, 3) removed.
+
+    The curve lies on the surface, so the true normal is perpendicular to its tangent; what
+    the estimate has along the tangent is error (a slope of the neighbourhood's plane), and
+    removing it makes the torch exactly perpendicular to the cut direction. Rows where the
+    normal is (nearly) parallel to the tangent are kept as they are.
+    """
+    along = np.einsum("ij,ij->i", normals, tangents)
+    out = normals - along[:, None] * tangents
+    norm = np.linalg.norm(out, axis=1)
+    ok = norm > 0.1
+    out[ok] /= norm[ok, None]
+    out[~ok] = normals[~ok]
+    return out
+
+
+def torch_rotations(axes: FloatArray, tangents: FloatArray) -> FloatArray:
+    """Torch orientations (N, 3, 3), columns x, y, z: z = −axis, x = tangent made orthogonal.
+
+    ``axes`` (N, 3) point from the surface to the torch; ``tangents`` (N, 3) along the cut.
+    Where the tangent is parallel to the axis, x falls back to a fixed perpendicular direction.
+    """
+    z = -np.asarray(axes, dtype=np.float64)
+    z /= np.linalg.norm(z, axis=1, keepdims=True)
+    x = tangents - np.einsum("ij,ij->i", tangents, z)[:, None] * z
+    norm = np.linalg.norm(x, axis=1)
+    degenerate = norm < 1e-9
+    if degenerate.any():
+        helper = np.where(np.abs(z[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+        alt = helper - np.einsum("ij,ij->i", helper, z)[:, None] * z
+        x[degenerate] = alt[degenerate]
+        norm = np.linalg.norm(x, axis=1)
+    x /= norm[:, None]
+    y = np.cross(z, x)
+    return np.stack([x, y, z], axis=2)
+
+
+def cutting_times(
+    arc_length: FloatArray,
+    tilt_rad: FloatArray,
+    speeds: SpeedTable,
+    *,
+    material: str,
+    thickness_mm: float,
+) -> tuple[FloatArray, FloatArray]:
+    """Travel speed (N,) in m/s and time stamps (N,) in s along the path.
+
+    A torch tilted by θ cuts through thickness / cos θ of plate (as bevel charts do), so its
+    speed is the chart's at that thickness (capped at the chart's thickest row). Each segment
+    runs at the slower of its two ends. ``time[0]`` is the pierce time: the torch dwells at
+    the first set-point from 0 to ``time[0]`` while preheating and piercing.
+    """
+    speed0, pierce = speeds.lookup(material, thickness_mm)
+    _, hi = speeds.thickness_range_mm(material)
+    effective = np.minimum(thickness_mm / np.cos(np.asarray(tilt_rad, dtype=np.float64)), hi)
+    speed, _ = speeds.speeds(material, np.maximum(effective, thickness_mm))
+    speed = np.where(np.asarray(tilt_rad) > 0, speed, speed0)
+    seg = np.diff(arc_length)
+    seg_speed = np.minimum(speed[1:], speed[:-1])
+    time = pierce + np.concatenate([[0.0], np.cumsum(seg / seg_speed)])
+    return np.asarray(speed, dtype=np.float64), time
+
+
+def _points(values: ArrayLike, name: str) -> FloatArray:
+    arr = np.asarray(values, dtype=np.float64)
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise ToolpathError(f"{name} must be an (N, 3) array, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ToolpathError(f"{name} contains NaN or infinite values")
+    return arr
+
+
+def _check_config(config: ToolpathConfig) -> None:
+    positive = (
+        "spacing_m",
+        "normal_radius_m",
+        "coarse_normal_radius_m",
+        "torch_length_m",
+        "torch_radius_m",
+        "thickness_mm",
+        "collision_min_points",
+    )
+    for name in positive:
+        value = getattr(config, name)
+        if not value > 0:
+            raise ToolpathError(f"toolpath.{name} must be positive, got {value}")
+    for name in ("normal_smoothing_m", "tilt_steps", "tilt_directions", "min_surface_points"):
+        if getattr(config, name) < 0:
+            raise ToolpathError(f"toolpath.{name} must be >= 0, got {getattr(config, name)}")
+    if config.standoff_m < 0:
+        raise ToolpathError(f"toolpath.standoff_m must be >= 0, got {config.standoff_m}")
+    if not 0 <= config.max_tilt_deg < 90:
+        raise ToolpathError(f"toolpath.max_tilt_deg must be in [0, 90), got {config.max_tilt_deg}")
+    if not 0 < config.edge_angle_deg <= 180:
+        raise ToolpathError(
+            f"toolpath.edge_angle_deg must be in (0, 180], got {config.edge_angle_deg}"
+        )

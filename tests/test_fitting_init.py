@@ -1,0 +1,80 @@
+"""The fitting package's entry points: method dispatch and end extrapolation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import arc_on_cylinder, line_on_plane, painted_stroke
+
+from scrapcut_cli.config import ScrapcutConfig, config_from_dict
+from scrapcut_cli.errors import FittingError
+from scrapcut_cli.fitting import METHODS, extrapolate_end, fit_curve
+from scrapcut_cli.fitting.curve import Curve
+
+
+@pytest.fixture(scope="module")
+def ordered_line() -> np.ndarray:
+    line, normals = line_on_plane(0.4)
+    pts = painted_stroke(line, normals, seed=31)
+    return pts[np.argsort(pts[:, 0])]
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_fit_curve_dispatches_with_the_method_section(ordered_line, method):
+    curve = fit_curve(ordered_line, method, ScrapcutConfig())
+    assert curve.method == method
+    assert abs(curve.length - 0.4) < 0.01
+    assert (curve.nurbs is not None) == (method == "nurbs")
+
+
+def test_fit_curve_uses_the_config():
+    line, normals = line_on_plane(0.4)
+    pts = painted_stroke(line, normals, seed=32)
+    config = config_from_dict({"nurbs": {"control_points": 9, "refine": False}})
+    assert len(fit_curve(pts, "nurbs", config).nurbs.control_points) == 9
+    config = config_from_dict({"skeleton": {"leaf_size_m": 0.02}})
+    assert fit_curve(pts, "skeleton", config).info["leaf_size_m"] == 0.02
+
+
+def test_unknown_method():
+    with pytest.raises(FittingError, match="unknown fitting method 'spline'; known: nurbs"):
+        fit_curve(np.zeros((10, 3)), "spline", ScrapcutConfig())
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_extrapolate_along_a_straight_line(ordered_line, method):
+    curve = fit_curve(ordered_line, method, ScrapcutConfig())
+    point, direction = extrapolate_end(curve, "end", step_m=0.06)
+    assert abs(np.linalg.norm(direction) - 1.0) < 1e-12
+    assert direction[0] > 0.99  # the line runs along +x
+    np.testing.assert_allclose(point, curve.points[-1] + 0.06 * direction, atol=1e-12)
+    point, direction = extrapolate_end(curve, "start", step_m=0.06)
+    assert direction[0] < -0.99
+    assert point[0] < -0.05
+
+
+def test_extrapolate_follows_the_turn_of_an_arc():
+    # On a pipe the end direction is close to the tangent at the end (the chord of the whole
+    # arc would be 45 degrees off); a fitted end straightens a little over the last centimetres.
+    line, normals = arc_on_cylinder(angle=np.pi / 2)
+    pts = painted_stroke(line, normals, seed=33)
+    pts = pts[np.argsort(np.arctan2(pts[:, 1], pts[:, 0]))]
+    tangent_at_end = np.array([-1.0, 0.0, 0.0])  # at angle 90 degrees, going anticlockwise
+    for method in METHODS:
+        curve = fit_curve(pts, method, ScrapcutConfig())
+        _, direction = extrapolate_end(curve, "end", step_m=0.05)
+        assert np.degrees(np.arccos(np.clip(direction @ tangent_at_end, -1, 1))) < 15.0, method
+
+
+def test_extrapolate_a_plain_polyline():
+    curve = Curve(points=np.array([[0.0, 0.0, 0.0], [0.0, 0.1, 0.0]]), method="other")
+    point, direction = extrapolate_end(curve, "end", step_m=0.02)
+    np.testing.assert_allclose(direction, [0.0, 1.0, 0.0])
+    np.testing.assert_allclose(point, [0.0, 0.12, 0.0])
+
+
+@pytest.mark.parametrize(("end", "step"), [("middle", 0.1), ("end", -0.1)])
+def test_extrapolate_rejects_bad_arguments(end, step):
+    curve = Curve(points=np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0]]), method="other")
+    with pytest.raises(ValueError):
+        extrapolate_end(curve, end, step_m=step)  # type: ignore[arg-type]
