@@ -116,3 +116,215 @@ def build_config(
     if paint is not None:
         config = config.override("paint", preset=paint)
     return config
+
+
+# --------------------------------------------------------------------------- perception, stitching
+
+# (option, parameter, stage, field, factor to SI, click type, help). One table, so that every
+# parameter of the two stages is on the command line of `filter` and `stitch` (and of any
+# command that stitches), and applying them is one loop.
+_STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
+    (
+        "--min-depth-mm",
+        "min_depth_mm",
+        "perception",
+        "min_depth_m",
+        1e-3,
+        click.FloatRange(min=0.0),
+        "Nearest usable depth [mm] (default 100).",
+    ),
+    (
+        "--max-depth-mm",
+        "max_depth_mm",
+        "perception",
+        "max_depth_m",
+        1e-3,
+        click.FloatRange(min=0.0, min_open=True),
+        "Farthest usable depth [mm] (default 2000).",
+    ),
+    (
+        "--flying-pixel-ratio",
+        "flying_pixel_ratio",
+        "perception",
+        "flying_pixel_ratio",
+        1.0,
+        click.FloatRange(min=0.0, min_open=True),
+        "Drop pixels whose depth jumps by more than this share of it to a neighbour "
+        "(default 0.03).",
+    ),
+    (
+        "--min-paint-neighbors",
+        "min_paint_neighbors",
+        "perception",
+        "min_paint_neighbors",
+        1,
+        click.IntRange(0, 4),
+        "Drop paint pixels with fewer of 4 neighbours also paint (default 3; 0: off).",
+    ),
+    (
+        "--voxel-mm",
+        "voxel_mm",
+        "perception",
+        "voxel_size_m",
+        1e-3,
+        click.FloatRange(min=0.0, min_open=True),
+        "Per-frame paint downsampling voxel [mm] (default 2).",
+    ),
+    (
+        "--sor-neighbors",
+        "sor_neighbors",
+        "perception",
+        "sor_neighbors",
+        1,
+        click.IntRange(min=0),
+        "Statistical outlier removal: neighbours per point (default 20; 0: off).",
+    ),
+    (
+        "--sor-std-ratio",
+        "sor_std_ratio",
+        "perception",
+        "sor_std_ratio",
+        1.0,
+        click.FloatRange(min=0.0, min_open=True),
+        "Statistical outlier removal: standard deviations allowed (default 2.0).",
+    ),
+    (
+        "--min-paint-points",
+        "min_paint_points",
+        "perception",
+        "min_paint_points",
+        1,
+        click.IntRange(min=0),
+        "Fewer paint voxels in a frame after cleaning: frame skipped (default 20).",
+    ),
+    (
+        "--surface-band-mm",
+        "surface_band_mm",
+        "perception",
+        "surface_band_m",
+        1e-3,
+        click.FloatRange(min=0.0),
+        "Width of the surface kept around the paint [mm] (default 40; 0: none).",
+    ),
+    (
+        "--surface-voxel-mm",
+        "surface_voxel_mm",
+        "perception",
+        "surface_voxel_m",
+        1e-3,
+        click.FloatRange(min=0.0, min_open=True),
+        "Surface downsampling voxel [mm] (default 4).",
+    ),
+    (
+        "--stitch-voxel-mm",
+        "stitch_voxel_mm",
+        "stitch",
+        "voxel_size_m",
+        1e-3,
+        click.FloatRange(min=0.0, min_open=True),
+        "Stitching voxel [mm]: the unit of the cloud's size (default 2).",
+    ),
+    (
+        "--icp/--no-icp",
+        "icp",
+        "stitch",
+        "icp",
+        1,
+        None,
+        "Refine each frame against the stitched cloud with ICP (default off).",
+    ),
+    (
+        "--icp-method",
+        "icp_method",
+        "stitch",
+        "icp_method",
+        1,
+        click.Choice(["point_to_point", "point_to_plane"]),
+        "ICP error metric (default point_to_point).",
+    ),
+    (
+        "--icp-max-distance-mm",
+        "icp_max_distance_mm",
+        "stitch",
+        "icp_max_distance_m",
+        1e-3,
+        click.FloatRange(min=0.0, min_open=True),
+        "ICP correspondence distance [mm] (default 10).",
+    ),
+    (
+        "--icp-max-translation-mm",
+        "icp_max_translation_mm",
+        "stitch",
+        "icp_max_translation_m",
+        1e-3,
+        click.FloatRange(min=0.0),
+        "Largest ICP correction accepted, at the frame's centre [mm] (default 5).",
+    ),
+    (
+        "--icp-max-rotation-deg",
+        "icp_max_rotation_deg",
+        "stitch",
+        "icp_max_rotation_deg",
+        1,
+        click.FloatRange(min=0.0),
+        "Largest ICP rotation accepted [deg] (default 2).",
+    ),
+    (
+        "--icp-max-iterations",
+        "icp_max_iterations",
+        "stitch",
+        "icp_max_iterations",
+        1,
+        click.IntRange(min=1),
+        "ICP iterations (default 30).",
+    ),
+    (
+        "--icp-min-overlap",
+        "icp_min_overlap",
+        "stitch",
+        "icp_min_overlap",
+        1,
+        click.FloatRange(0.0, 1.0),
+        "Share of a frame's paint near the cloud needed to try ICP (default 0.3).",
+    ),
+]
+
+
+def _stage_options(stages: tuple[str, ...]) -> Callable[[F], F]:
+    def decorate(f: F) -> F:
+        for flag, name, stage, _, _, kind, text in reversed(_STAGE_OPTIONS):
+            if stage not in stages:
+                continue
+            if kind is None:  # a --x/--no-x flag
+                f = click.option(flag, name, default=None, help=text)(f)
+            else:
+                f = click.option(flag, name, type=kind, default=None, help=text)(f)
+        return f
+
+    return decorate
+
+
+#: Every perception parameter as an option (``--voxel-mm``, ``--sor-neighbors``...).
+perception_options = _stage_options(("perception",))
+#: Every stitching parameter as an option (``--stitch-voxel-mm``, ``--icp``...).
+stitch_options = _stage_options(("stitch",))
+
+
+def split_stage_options(options: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(perception/stitch option values, the rest) of a command's keyword arguments."""
+    names = {row[1] for row in _STAGE_OPTIONS}
+    stage = {k: v for k, v in options.items() if k in names}
+    rest = {k: v for k, v in options.items() if k not in names}
+    return stage, rest
+
+
+def apply_stage_options(config: ScrapcutConfig, values: dict[str, Any]) -> ScrapcutConfig:
+    """``config`` with perception/stitch option values applied (None: not given), in SI units."""
+    for _, name, stage, field_name, factor, _, _ in _STAGE_OPTIONS:
+        value = values.get(name)
+        if value is None:
+            continue
+        if isinstance(value, float) and factor != 1:
+            value = value * factor
+        config = config.override(stage, **{field_name: value})
+    return config

@@ -1,0 +1,209 @@
+"""``scrapcut filter``: per-frame paint clouds of a recording (MCAP for Foxglove, or PLY files)."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+from collections.abc import Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import click
+
+from scrapcut_cli.commands._options import (
+    apply_stage_options,
+    build_config,
+    config_option,
+    paint_options,
+    perception_options,
+    recording_options,
+    split_stage_options,
+)
+
+if TYPE_CHECKING:
+    from scrapcut_cli.perception.cloud import FrameClouds, PerceptionTally
+    from scrapcut_cli.recording.reader import FramePlan
+
+PAINT_TOPIC = "/scrapcut/paint"
+SURFACE_TOPIC = "/scrapcut/surface"
+
+
+class _McapSink:
+    """Every frame's clouds as sensor_msgs/PointCloud2 at the image stamp, base frame."""
+
+    def __init__(self, writer: Any, base_frame: str, rgb: tuple[int, int, int], surface: bool):
+        self.writer = writer
+        self.base_frame = base_frame
+        self.rgb = rgb
+        self.surface = surface
+
+    def add(self, clouds: FrameClouds) -> None:
+        import numpy as np
+
+        colours = np.tile(np.asarray(self.rgb, dtype=np.uint8), (len(clouds.paint_base), 1))
+        # Frames without paint get an empty cloud, so a viewer clears the previous one.
+        self.writer.write_pointcloud(
+            PAINT_TOPIC, clouds.stamp_ns, self.base_frame, clouds.paint_base, colours
+        )
+        if self.surface:
+            self.writer.write_pointcloud(
+                SURFACE_TOPIC, clouds.stamp_ns, self.base_frame, clouds.surface_base
+            )
+
+
+class _PlySink:
+    """One PLY per frame with paint: ``paint_000012.ply`` (and ``surface_000012.ply``)."""
+
+    def __init__(self, directory: Path, surface: bool) -> None:
+        self.directory = directory
+        self.surface = surface
+
+    def add(self, clouds: FrameClouds) -> None:
+        from scrapcut_cli.commands.stitch import write_cloud
+
+        if clouds.skipped:
+            return
+        write_cloud(self.directory / f"paint_{clouds.frame_index:06d}.ply", clouds.paint_base)
+        if self.surface and len(clouds.surface_base):
+            name = f"surface_{clouds.frame_index:06d}.ply"
+            write_cloud(self.directory / name, clouds.surface_base)
+
+
+@contextlib.contextmanager
+def _sink(
+    output: Path | None,
+    *,
+    base_frame: str,
+    rgb: tuple[int, int, int],
+    surface: bool,
+    meta: dict[str, str],
+) -> Iterator[_McapSink | _PlySink | None]:
+    """Where the clouds go; the output appears only if the block finishes without an error."""
+    if output is None:
+        yield None
+        return
+    if output.suffix.lower() == ".mcap":
+        from scrapcut_cli.recording.writer import McapWriter
+
+        with McapWriter(output) as writer:
+            writer.add_metadata("scrapcut", meta)
+            yield _McapSink(writer, base_frame, rgb, surface)
+        return
+    from scrapcut_cli._io import atomic_path
+
+    with atomic_path(output, directory=True) as tmp:
+        yield _PlySink(tmp, surface)
+
+
+@click.command("filter")
+@click.argument("recording", type=click.Path(path_type=Path))
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="PAINT.mcap (PointCloud2 on /scrapcut/paint, base frame) or a folder of PLY files; "
+    "without it only the summary is printed.",
+)
+@click.option(
+    "--surface",
+    "with_surface",
+    is_flag=True,
+    help="Also write each frame's surface band (/scrapcut/surface, or surface_*.ply).",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+@config_option
+@recording_options
+@paint_options
+@perception_options
+def filter_cmd(
+    recording: Path,
+    output: Path | None,
+    with_surface: bool,
+    as_json: bool,
+    config_path: Path | None,
+    **options: Any,
+) -> None:
+    """Filter the paint out of every frame of RECORDING and back-project it.
+
+    Per frame: HSV colour filter, depth gate (range, flying pixels), back-projection into the
+    base frame, voxel downsampling and statistical outlier removal. Frames without paint are
+    counted, not fatal; a recording without any paint is an error that names the colours seen.
+    """
+    from scrapcut_cli.commands._console import err, out, progress
+    from scrapcut_cli.perception.cloud import PerceptionTally, process_frame
+    from scrapcut_cli.perception.paint import PAINT_PRESETS, resolve_recording_paint
+    from scrapcut_cli.recording.reader import open_recording
+
+    if output is not None and output.suffix and output.suffix.lower() != ".mcap":
+        raise click.BadParameter(
+            f"{output}: give a .mcap file or a folder name (no suffix)", param_hint="-o"
+        )
+    stage, shared = split_stage_options(options)
+    config = apply_stage_options(build_config(config_path, **shared), stage)
+
+    with open_recording(recording, config.recording) as rec:
+        plan = rec.plan()
+        hsv = resolve_recording_paint(config.paint, rec.metadata)
+        preset = PAINT_PRESETS.get(hsv.name)
+        meta = {
+            "kind": "paint_clouds",
+            "source": str(recording),
+            "paint": hsv.describe(),
+            "params": json.dumps(config.to_dict(), sort_keys=True),
+        }
+        tally = PerceptionTally(hsv)
+        with (
+            _sink(
+                output,
+                base_frame=rec.base_frame,
+                rgb=preset.rgb if preset else (255, 0, 255),
+                surface=with_surface,
+                meta=meta,
+            ) as sink,
+            progress("frames") as bar,
+        ):
+            task = bar.add_task("filtering", total=plan.usable, status="")
+            for frame in rec.frames():
+                clouds = process_frame(frame, hsv, config.perception)
+                tally.add(clouds, frame.color)
+                if sink is not None:
+                    sink.add(clouds)
+                bar.update(task, advance=1, status=f"{tally.paint_points:,} points")
+            tally.raise_if_no_paint()  # before the output is committed
+
+    summary = {
+        "recording": str(recording),
+        "output": None if output is None else str(output),
+        "reader_skipped": plan.skipped,
+        "reader_skip_reasons": dict(plan.skip_reasons),
+        **tally.to_dict(),
+    }
+    if as_json:
+        out.print_json(json.dumps(summary))
+        return
+    _render(tally, plan)
+    if output is not None:
+        err.print(f"wrote {output}")
+
+
+def _render(tally: PerceptionTally, plan: FramePlan) -> None:
+    from rich.table import Table
+
+    from scrapcut_cli.commands._console import out
+
+    table = Table(title=f"paint filter: {tally.hsv.describe()}", show_header=False)
+    table.add_column("", style="bold")
+    table.add_column("", justify="right")
+    table.add_row("frames", str(tally.frames))
+    table.add_row("frames with paint", str(tally.frames_with_paint))
+    skipped = ", ".join(f"{k} {v}" for k, v in sorted(tally.skip_reasons.items())) or "none"
+    table.add_row("frames skipped (why)", skipped)
+    if plan.skipped:
+        reader = ", ".join(f"{k} {v}" for k, v in sorted(plan.skip_reasons.items()))
+        table.add_row("frames the reader skipped", f"{plan.skipped} ({reader})")
+    table.add_row("paint pixels", f"{tally.paint_pixels:,}")
+    table.add_row("with usable depth", f"{tally.valid_paint_pixels:,}")
+    table.add_row("paint points kept", f"{tally.paint_points:,}")
+    table.add_row("surface points", f"{tally.surface_points:,}")
+    out.print(table)

@@ -1,0 +1,170 @@
+"""``scrapcut stitch``: the stitched paint cloud of a recording (PLY or PCD)."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import click
+
+from scrapcut_cli.commands._options import (
+    apply_stage_options,
+    build_config,
+    config_option,
+    paint_options,
+    perception_options,
+    recording_options,
+    split_stage_options,
+    stitch_options,
+)
+
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
+    from scrapcut_cli.perception.stitch import StitchResult
+
+CLOUD_SUFFIXES = (".ply", ".pcd")
+
+
+def check_cloud_path(path: Path | None, option: str) -> None:
+    """A usage error unless ``path`` ends in .ply or .pcd (open3d picks the format by it)."""
+    if path is not None and path.suffix.lower() not in CLOUD_SUFFIXES:
+        raise click.BadParameter(
+            f"{path} must end in .ply or .pcd (the format is taken from it)", param_hint=option
+        )
+
+
+def write_cloud(target: Path, points: NDArray[np.float64]) -> None:
+    """Write points (N, 3), metres, as PLY or PCD (by ``target``'s suffix), atomically.
+
+    open3d chooses the format by the file name's extension, so it writes to a staging name
+    with the target's suffix, which is then renamed onto the atomic temporary.
+    """
+    import numpy as np
+
+    from scrapcut_cli._io import atomic_path
+    from scrapcut_cli._open3d import o3d
+    from scrapcut_cli.errors import PerceptionError
+
+    o3 = o3d()
+    cloud = o3.geometry.PointCloud(o3.utility.Vector3dVector(np.asarray(points, np.float64)))
+    with atomic_path(target) as tmp:
+        staging = tmp.with_name(tmp.name + target.suffix.lower())
+        try:
+            if len(points) == 0 or not o3.io.write_point_cloud(str(staging), cloud):
+                raise PerceptionError(f"cannot write {len(points)} points to {target}")
+            os.replace(staging, tmp)
+        finally:
+            staging.unlink(missing_ok=True)
+
+
+@click.command("stitch")
+@click.argument("recording", type=click.Path(path_type=Path))
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="Stitched paint cloud to write (.ply or .pcd), base frame, metres.",
+)
+@click.option(
+    "--surface",
+    "surface_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Also write the surface band around the paint (.ply or .pcd).",
+)
+@click.option(
+    "--json", "as_json", is_flag=True, help="Print the summary and per-frame growth as JSON."
+)
+@config_option
+@recording_options
+@paint_options
+@perception_options
+@stitch_options
+def stitch(
+    recording: Path,
+    output: Path,
+    surface_path: Path | None,
+    as_json: bool,
+    config_path: Path | None,
+    **options: Any,
+) -> None:
+    """Stitch the paint seen in every frame of RECORDING into one cloud.
+
+    Each frame's paint (HSV filter, depth gate, back-projection, voxel downsampling, outlier
+    removal) is merged on a voxel grid, so paint seen twice counts once; --icp refines each
+    frame against the cloud first. The cloud's size and its growth per frame (Algorithm 1's
+    size(k) - size(k-1)) are printed; --json adds them frame by frame.
+    """
+    from scrapcut_cli.commands._console import err, out, progress
+    from scrapcut_cli.perception.paint import resolve_recording_paint
+    from scrapcut_cli.perception.stitch import stitch_recording
+    from scrapcut_cli.recording.reader import open_recording
+
+    check_cloud_path(output, "-o")
+    check_cloud_path(surface_path, "--surface")
+    if surface_path is not None and surface_path.resolve() == output.resolve():
+        raise click.UsageError("--surface and -o name the same file")
+    stage, shared = split_stage_options(options)
+    config = apply_stage_options(build_config(config_path, **shared), stage)
+
+    with open_recording(recording, config.recording) as rec:
+        plan = rec.plan()
+        hsv = resolve_recording_paint(config.paint, rec.metadata)
+        with progress("frames") as bar:
+            task = bar.add_task("stitching", total=plan.usable, status="")
+
+            def advance(step: Any) -> None:
+                bar.update(task, advance=1, status=f"{step.size} voxels")
+
+            result = stitch_recording(rec.frames(), hsv, config, progress=advance)
+    write_cloud(output, result.paint_points)
+    if surface_path is not None:
+        write_cloud(surface_path, result.surface_points)
+
+    summary = {
+        "recording": str(recording),
+        "output": str(output),
+        "surface_output": None if surface_path is None else str(surface_path),
+        "reader_skipped": plan.skipped,
+        "reader_skip_reasons": dict(plan.skip_reasons),
+        **result.to_dict(),
+        "config": config.to_dict(),
+    }
+    if as_json:
+        out.print_json(json.dumps(summary))
+        return
+    _render(result, plan.skipped, output, surface_path)
+    err.print(f"wrote {output}" + ("" if surface_path is None else f" and {surface_path}"))
+
+
+def _render(result: StitchResult, reader_skipped: int, output: Path, surface: Path | None) -> None:
+    from rich.table import Table
+
+    from scrapcut_cli.commands._console import out
+
+    tally = result.tally
+    table = Table(title=f"stitched {result.hsv.describe()}", show_header=False)
+    table.add_column("", style="bold")
+    table.add_column("", justify="right")
+    table.add_row("frames", str(tally.frames))
+    table.add_row("frames with paint", str(tally.frames_with_paint))
+    skipped = ", ".join(f"{k} {v}" for k, v in sorted(result.skip_reasons.items())) or "none"
+    table.add_row("frames without usable paint", skipped)
+    if reader_skipped:
+        table.add_row("frames the reader skipped", str(reader_skipped))
+    table.add_row("paint pixels", f"{tally.paint_pixels:,}")
+    table.add_row("paint voxels (size)", f"{result.size:,}")
+    last = [s.growth for s in result.steps[-3:]]
+    table.add_row("growth, last frames", ", ".join(str(g) for g in last))
+    table.add_row("surface points", f"{len(result.surface_points):,}")
+    if any(s.icp is not None for s in result.steps):
+        table.add_row("ICP corrections accepted", str(result.icp_accepted))
+    table.add_row("cloud", str(output))
+    if surface is not None:
+        table.add_row("surface cloud", str(surface))
+    out.print(table)

@@ -1,0 +1,466 @@
+"""Stitching per-frame clouds into one paint cloud: voxel deduplication, optional ICP, growth.
+
+:class:`Stitcher` is the first half of Algorithm 1's loop: it takes frames one at a time and
+reports the stitched cloud's size — the number of occupied paint voxels, ``size(k)`` — and its
+growth ``size(k) − size(k−1)``, which the stopping criterion compares with δ_size. A voxel
+holds the running mean of the points that fell into it, so re-observing the same paint averages
+noise down and grows nothing.
+
+:func:`stitch_recording` is the recipe that ``scrapcut stitch``, ``scrapcut fit`` and the
+exploration replay share: perception of each frame, then the stitcher.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
+
+from scrapcut_cli._open3d import o3d
+from scrapcut_cli.config import PerceptionConfig, ScrapcutConfig, StitchConfig
+from scrapcut_cli.errors import PerceptionError
+from scrapcut_cli.geometry import pack_voxel_keys, rotation_angle, transform_points, voxel_keys
+from scrapcut_cli.perception.cloud import FrameClouds, PerceptionTally, process_frame
+from scrapcut_cli.perception.paint import HsvRange
+from scrapcut_cli.recording.frame import Frame
+
+FloatArray = NDArray[np.float64]
+
+ICP_METHODS = ("point_to_point", "point_to_plane")
+
+
+@dataclass(frozen=True, eq=False)
+class IcpOutcome:
+    """What ICP refinement of one frame against the stitched cloud did.
+
+    ``T_correction`` (4, 4) maps the frame's base-frame points onto the stitched cloud; it is
+    the identity unless ``accepted``. ``reason``: ``accepted``, ``first_frame``,
+    ``too_few_points``, ``low_overlap``, ``no_improvement``, ``translation_too_large``,
+    ``rotation_too_large``. Fitness is the share of the frame's points with a stitched point
+    within ``icp_max_distance_m``.
+    """
+
+    accepted: bool
+    reason: str
+    fitness_before: float = 0.0
+    fitness_after: float = 0.0
+    rmse_before_m: float = 0.0
+    rmse_after_m: float = 0.0
+    translation_m: float = 0.0
+    rotation_deg: float = 0.0
+    T_correction: FloatArray = field(default_factory=lambda: np.eye(4))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary (millimetres for readability, as in reports)."""
+        return {
+            "accepted": self.accepted,
+            "reason": self.reason,
+            "fitness_before": round(self.fitness_before, 6),
+            "fitness_after": round(self.fitness_after, 6),
+            "rmse_before_mm": round(1000.0 * self.rmse_before_m, 4),
+            "rmse_after_mm": round(1000.0 * self.rmse_after_m, 4),
+            "translation_mm": round(1000.0 * self.translation_m, 4),
+            "rotation_deg": round(self.rotation_deg, 5),
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class StitchStep:
+    """One frame's effect on the stitched cloud.
+
+    ``k`` counts the frames given to the stitcher from 0; ``size`` is the number of occupied
+    paint voxels after the frame (Algorithm 1's size(k)); ``growth`` = size(k) − size(k−1).
+    """
+
+    k: int
+    frame_index: int
+    stamp_ns: int
+    size: int
+    growth: int
+    surface_size: int
+    paint_pixels: int
+    valid_paint_pixels: int
+    frame_points: int
+    skip_reason: str | None = None
+    icp: IcpOutcome | None = None
+
+    @property
+    def icp_accepted(self) -> bool:
+        """True when an ICP correction was applied to this frame."""
+        return self.icp is not None and self.icp.accepted
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready record (fixed keys: k, frame, size, growth)."""
+        out: dict[str, Any] = {
+            "k": self.k,
+            "frame": self.frame_index,
+            "stamp_ns": self.stamp_ns,
+            "size": self.size,
+            "growth": self.growth,
+            "surface_size": self.surface_size,
+            "paint_pixels": self.paint_pixels,
+            "valid_paint_pixels": self.valid_paint_pixels,
+            "frame_points": self.frame_points,
+            "skip_reason": self.skip_reason,
+        }
+        if self.icp is not None:
+            out["icp"] = self.icp.to_dict()
+        return out
+
+
+class _VoxelMap:
+    """Running-mean points on a world-aligned voxel grid, keyed by packed voxel index.
+
+    Keys are kept sorted, so a frame is merged with one ``searchsorted`` and one ``insert``
+    (vectorised, no Python loop over points) and the output order is deterministic.
+    """
+
+    def __init__(self, voxel_size_m: float) -> None:
+        self.voxel_size_m = voxel_size_m
+        self.keys = np.zeros(0, dtype=np.int64)
+        self.sums = np.zeros((0, 3))
+        self.counts = np.zeros(0, dtype=np.int64)
+        self.viewpoints = np.zeros((0, 3))
+
+    def __len__(self) -> int:
+        return int(self.keys.size)
+
+    @property
+    def points(self) -> FloatArray:
+        return np.asarray(self.sums / self.counts[:, None])
+
+    def add(self, points: FloatArray, viewpoint: FloatArray) -> int:
+        """Merge points (N, 3); new voxels remember ``viewpoint`` (3,). Returns voxels added."""
+        if len(points) == 0:
+            return 0
+        packed = pack_voxel_keys(voxel_keys(points, self.voxel_size_m))
+        keys, inverse = np.unique(packed, return_inverse=True)
+        counts = np.bincount(inverse, minlength=keys.size)
+        sums = np.column_stack(
+            [np.bincount(inverse, weights=points[:, i], minlength=keys.size) for i in range(3)]
+        )
+        pos = np.searchsorted(self.keys, keys)
+        found = pos < self.keys.size
+        found[found] = self.keys[pos[found]] == keys[found]
+        self.sums[pos[found]] += sums[found]
+        self.counts[pos[found]] += counts[found]
+        new = ~found
+        at = pos[new]
+        self.keys = np.insert(self.keys, at, keys[new])
+        self.sums = np.insert(self.sums, at, sums[new], axis=0)
+        self.counts = np.insert(self.counts, at, counts[new])
+        self.viewpoints = np.insert(
+            self.viewpoints, at, np.broadcast_to(viewpoint, (int(new.sum()), 3)), axis=0
+        )
+        return int(new.sum())
+
+
+def check_stitch_config(config: StitchConfig) -> None:
+    """Raise :class:`PerceptionError` naming the first stitching parameter out of its range."""
+    positive = {
+        "voxel_size_m": config.voxel_size_m,
+        "icp_max_distance_m": config.icp_max_distance_m,
+        "icp_max_iterations": config.icp_max_iterations,
+    }
+    for name, value in positive.items():
+        if not value > 0:
+            raise PerceptionError(f"stitch.{name} must be positive, got {value}")
+    if config.icp_max_translation_m < 0 or config.icp_max_rotation_deg < 0:
+        raise PerceptionError(
+            "stitch.icp_max_translation_m and icp_max_rotation_deg must be >= 0, got "
+            f"{config.icp_max_translation_m} and {config.icp_max_rotation_deg}"
+        )
+    if not 0.0 <= config.icp_min_overlap <= 1.0:
+        raise PerceptionError(
+            f"stitch.icp_min_overlap must be within 0-1, got {config.icp_min_overlap}"
+        )
+    if config.icp_method not in ICP_METHODS:
+        raise PerceptionError(
+            f"unknown stitch.icp_method {config.icp_method!r}; known: {', '.join(ICP_METHODS)}"
+        )
+
+
+class Stitcher:
+    """Accumulates per-frame paint and surface clouds (base frame) into deduplicated clouds.
+
+    Parameters
+    ----------
+    config : StitchConfig
+        Paint voxel size (the unit of ``size``) and the ICP options.
+    perception : PerceptionConfig
+        Its ``surface_voxel_m`` is the grid of the stitched surface cloud.
+
+    Attributes
+    ----------
+    paint_points : (N, 3) float64
+        Metres, base frame: one point per occupied paint voxel (mean of what fell in it).
+    paint_viewpoints : (N, 3) float64
+        Camera centre of the first frame that saw each paint voxel.
+    surface_points, surface_viewpoints : (M, 3) float64
+        The same for the non-paint surface band (normals point towards the viewpoint).
+    size : int
+        Number of occupied paint voxels: Algorithm 1's size(k).
+    steps : list of StitchStep
+        One per :meth:`add`.
+    """
+
+    def __init__(self, config: StitchConfig, *, perception: PerceptionConfig) -> None:
+        check_stitch_config(config)
+        self.config = config
+        self.perception = perception
+        self._paint = _VoxelMap(config.voxel_size_m)
+        self._surface = _VoxelMap(perception.surface_voxel_m)
+        self.steps: list[StitchStep] = []
+
+    @property
+    def size(self) -> int:
+        return len(self._paint)
+
+    @property
+    def paint_points(self) -> FloatArray:
+        return self._paint.points
+
+    @property
+    def paint_viewpoints(self) -> FloatArray:
+        return self._paint.viewpoints.copy()
+
+    @property
+    def surface_points(self) -> FloatArray:
+        return self._surface.points
+
+    @property
+    def surface_viewpoints(self) -> FloatArray:
+        return self._surface.viewpoints.copy()
+
+    def add(self, clouds: FrameClouds, *, T_base_cam: ArrayLike | None = None) -> StitchStep:
+        """Merge one frame's clouds; returns its step (size, growth, ICP outcome).
+
+        ``T_base_cam`` (4, 4) is the pose the clouds were projected with (default: theirs); the
+        camera centre, corrected by ICP when it is accepted, becomes the new voxels' viewpoint.
+        """
+        pose = clouds.T_base_cam if T_base_cam is None else np.asarray(T_base_cam, np.float64)
+        k = len(self.steps)
+        before = self.size
+        icp: IcpOutcome | None = None
+        paint, surface = clouds.paint_base, clouds.surface_base
+        if clouds.skip_reason is None and len(paint):
+            if self.config.icp:
+                icp = self._refine(paint)
+                if icp.accepted:
+                    paint = transform_points(icp.T_correction, paint)
+                    surface = transform_points(icp.T_correction, surface)
+                    pose = icp.T_correction @ pose
+            viewpoint = np.asarray(pose[:3, 3], dtype=np.float64)
+            self._paint.add(paint, viewpoint)
+            self._surface.add(surface, viewpoint)
+        step = StitchStep(
+            k=k,
+            frame_index=clouds.frame_index,
+            stamp_ns=clouds.stamp_ns,
+            size=self.size,
+            growth=self.size - before,
+            surface_size=len(self._surface),
+            paint_pixels=clouds.paint_pixels,
+            valid_paint_pixels=clouds.valid_paint_pixels,
+            frame_points=len(clouds.paint_base),
+            skip_reason=clouds.skip_reason,
+            icp=icp,
+        )
+        self.steps.append(step)
+        return step
+
+    # ------------------------------------------------------------------ ICP
+
+    def _refine(self, paint: FloatArray) -> IcpOutcome:
+        """Point-to-point ICP of the frame's paint against the stitched paint near it, guarded.
+
+        Only the frame's points that already have a stitched neighbour within
+        ``icp_max_distance_m`` take part: in a sweep each new frame also shows paint that is
+        not stitched yet, and those points would pull the frame back onto the old cloud's end
+        (the partial-overlap bias). Fitness, before and after, is the share of those points
+        within one paint voxel of the stitched cloud. The paint alone is registered: the
+        surface around it is often a plane or a cylinder, along which ICP slides freely, while
+        the stroke's edges and bends hold it.
+        """
+        cfg = self.config
+        if self.size == 0:
+            return IcpOutcome(False, "first_frame")
+        target_pts = self._paint.points
+        lo = paint.min(axis=0) - cfg.icp_max_distance_m
+        hi = paint.max(axis=0) + cfg.icp_max_distance_m
+        target_pts = target_pts[np.all((target_pts >= lo) & (target_pts <= hi), axis=1)]
+        if len(target_pts) < 10:
+            return IcpOutcome(False, "low_overlap")
+        tree = cKDTree(target_pts)
+        distance, _ = tree.query(paint, distance_upper_bound=cfg.icp_max_distance_m)
+        overlap = np.isfinite(distance)
+        share = float(overlap.mean())
+        if share < cfg.icp_min_overlap or overlap.sum() < 10:
+            return IcpOutcome(False, "low_overlap", fitness_before=share)
+        source_pts = paint[overlap]
+        inlier = cfg.voxel_size_m
+        fitness_before, rmse_before = _fitness(tree, source_pts, inlier)
+        T = _icp(source_pts, target_pts, cfg)
+        fitness_after, rmse_after = _fitness(tree, transform_points(T, source_pts), inlier)
+        # The correction's size is judged where it acts: at the frame's centroid.
+        centroid = source_pts.mean(axis=0)
+        translation = float(np.linalg.norm(transform_points(T, centroid)[0] - centroid))
+        outcome: dict[str, Any] = {
+            "fitness_before": fitness_before,
+            "fitness_after": fitness_after,
+            "rmse_before_m": rmse_before,
+            "rmse_after_m": rmse_after,
+            "translation_m": translation,
+            "rotation_deg": math.degrees(rotation_angle(np.eye(3), T[:3, :3])),
+        }
+        if fitness_after <= fitness_before:
+            return IcpOutcome(False, "no_improvement", **outcome)
+        if translation > cfg.icp_max_translation_m:
+            return IcpOutcome(False, "translation_too_large", **outcome)
+        if outcome["rotation_deg"] > cfg.icp_max_rotation_deg:
+            return IcpOutcome(False, "rotation_too_large", **outcome)
+        return IcpOutcome(True, "accepted", T_correction=T, **outcome)
+
+
+def _fitness(tree: cKDTree, points: FloatArray, inlier_m: float) -> tuple[float, float]:
+    """(share of points within ``inlier_m`` of the tree's points, RMS distance of those)."""
+    distance, _ = tree.query(points, distance_upper_bound=inlier_m)
+    inliers = distance[np.isfinite(distance)]
+    rmse = float(np.sqrt(np.mean(inliers**2))) if inliers.size else 0.0
+    return float(inliers.size / max(len(points), 1)), rmse
+
+
+def _icp(source_pts: FloatArray, target_pts: FloatArray, config: StitchConfig) -> FloatArray:
+    """open3d ICP of source onto target (N, 3); the (4, 4) correction in the base frame."""
+    o3 = o3d()
+    reg = o3.pipelines.registration
+    source = o3.geometry.PointCloud(o3.utility.Vector3dVector(source_pts))
+    target = o3.geometry.PointCloud(o3.utility.Vector3dVector(target_pts))
+    if config.icp_method == "point_to_plane":
+        radius = 3.0 * config.voxel_size_m
+        target.estimate_normals(o3.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=30))
+        estimation = reg.TransformationEstimationPointToPlane()
+    else:
+        estimation = reg.TransformationEstimationPointToPoint()
+    result = reg.registration_icp(
+        source,
+        target,
+        config.icp_max_distance_m,
+        np.eye(4),
+        estimation,
+        reg.ICPConvergenceCriteria(max_iteration=config.icp_max_iterations),
+    )
+    return np.asarray(result.transformation, dtype=np.float64).copy()
+
+
+# --------------------------------------------------------------------------- the recipe
+
+
+@dataclass(frozen=True, eq=False)
+class StitchResult:
+    """The stitched clouds of a recording and what each frame contributed.
+
+    Attributes
+    ----------
+    paint_points, paint_viewpoints : (N, 3) float64
+        Metres, base frame (see :class:`Stitcher`).
+    surface_points, surface_viewpoints : (M, 3) float64
+        Metres, base frame.
+    steps : list of StitchStep
+        One per frame, in order.
+    tally : PerceptionTally
+        Frame, pixel and point counts, skip reasons.
+    hsv : HsvRange
+        The paint range used.
+    base_frame : str
+        TF frame of the points (from the frames; empty if there were none).
+    """
+
+    paint_points: FloatArray
+    paint_viewpoints: FloatArray
+    surface_points: FloatArray
+    surface_viewpoints: FloatArray
+    steps: list[StitchStep]
+    tally: PerceptionTally
+    hsv: HsvRange
+    base_frame: str = ""
+
+    @property
+    def size(self) -> int:
+        """Occupied paint voxels at the end."""
+        return len(self.paint_points)
+
+    @property
+    def skip_reasons(self) -> dict[str, int]:
+        return dict(Counter(s.skip_reason for s in self.steps if s.skip_reason is not None))
+
+    @property
+    def icp_accepted(self) -> int:
+        """Frames whose ICP correction was applied."""
+        return sum(s.icp_accepted for s in self.steps)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary with the per-frame growth (``steps``)."""
+        return {
+            **self.tally.to_dict(),
+            "base_frame": self.base_frame,
+            "size": self.size,
+            "surface_size": len(self.surface_points),
+            "icp_accepted": self.icp_accepted,
+            "steps": [s.to_dict() for s in self.steps],
+        }
+
+
+def stitch_recording(
+    frames: Iterable[Frame],
+    hsv: HsvRange,
+    config: ScrapcutConfig,
+    *,
+    progress: Callable[[StitchStep], None] | None = None,
+) -> StitchResult:
+    """Perceive and stitch every frame: the stitched paint and surface clouds of a recording.
+
+    Parameters
+    ----------
+    frames : iterable of Frame
+        Streamed; each is processed and dropped (memory stays bounded).
+    hsv : HsvRange
+        The paint's colour range.
+    config : ScrapcutConfig
+        ``config.perception`` and ``config.stitch`` are used.
+    progress : callable, optional
+        Called with each frame's :class:`StitchStep`.
+
+    Raises
+    ------
+    PerceptionError
+        When no frame shows usable paint: one line naming the colour range and the dominant
+        hues the images showed instead. Frames without paint are only counted.
+    """
+    stitcher = Stitcher(config.stitch, perception=config.perception)
+    tally = PerceptionTally(hsv)
+    base_frame = ""
+    for frame in frames:
+        base_frame = frame.base_frame
+        clouds = process_frame(frame, hsv, config.perception)
+        tally.add(clouds, frame.color)
+        step = stitcher.add(clouds, T_base_cam=frame.T_base_cam)
+        if progress is not None:
+            progress(step)
+    tally.raise_if_no_paint()
+    return StitchResult(
+        paint_points=stitcher.paint_points,
+        paint_viewpoints=stitcher.paint_viewpoints,
+        surface_points=stitcher.surface_points,
+        surface_viewpoints=stitcher.surface_viewpoints,
+        steps=list(stitcher.steps),
+        tally=tally,
+        hsv=hsv,
+        base_frame=base_frame,
+    )

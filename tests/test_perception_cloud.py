@@ -1,0 +1,266 @@
+"""Per-frame clouds on synthetic RGB-D frames of a painted cylinder (see perception_scenes)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from perception_scenes import (
+    CYLINDER_AXIS_YZ,
+    CYLINDER_RADIUS_M,
+    SceneNoise,
+    cylinder_ring_line,
+    cylinder_top_line,
+    render_cylinder,
+    small_camera,
+    top_view,
+)
+
+from scrapcut_cli.config import PerceptionConfig
+from scrapcut_cli.errors import PerceptionError
+from scrapcut_cli.geometry import (
+    PolylineDistance,
+    make_transform,
+    nearest_distances,
+    transform_points,
+)
+from scrapcut_cli.perception.cloud import (
+    SKIP_NO_PAINT,
+    SKIP_NO_VALID_DEPTH,
+    SKIP_TOO_LITTLE_PAINT,
+    PerceptionTally,
+    backproject_paint,
+    backproject_pixels,
+    check_perception_config,
+    process_frame,
+    reject_isolated_pixels,
+    usable_depth_pixels,
+)
+from scrapcut_cli.perception.paint import PAINT_PRESETS
+from scrapcut_cli.recording.frame import CameraModel, Frame
+
+ORANGE = PAINT_PRESETS["orange"].hsv
+CONFIG = PerceptionConfig()
+HALF_WIDTH = 0.0125
+NOISY = SceneNoise(depth_sigma_m=0.0005, hole_fraction=0.02, flying_pixels=True, color_sigma=3.0)
+
+
+def radial_error(points: np.ndarray) -> np.ndarray:
+    """Distance (N,) of points from the cylinder's surface, metres."""
+    y0, z0 = CYLINDER_AXIS_YZ
+    return np.abs(np.hypot(points[:, 1] - y0, points[:, 2] - z0) - CYLINDER_RADIUS_M)
+
+
+@pytest.fixture(scope="module")
+def reference() -> np.ndarray:
+    return cylinder_top_line()
+
+
+@pytest.fixture(scope="module")
+def exact_frame(reference: np.ndarray) -> Frame:
+    return render_cylinder(small_camera(), top_view(0.02), reference)
+
+
+@pytest.fixture(scope="module")
+def noisy_frame(reference: np.ndarray) -> Frame:
+    return render_cylinder(small_camera(), top_view(0.02, tilt_m=0.04), reference, noise=NOISY)
+
+
+# --------------------------------------------------------------------------- stages
+
+
+def test_backprojection_matches_the_camera_model_with_distortion() -> None:
+    camera = CameraModel(
+        64, 48, 60.0, 61.0, 31.0, 24.5, "plumb_bob", (-0.12, 0.05, 0.001, -0.002, 0.01)
+    )
+    rng = np.random.default_rng(0)
+    depth = rng.uniform(0.2, 1.0, size=(48, 64)).astype(np.float32)
+    T = make_transform(np.eye(3)[[1, 2, 0]], [0.1, -0.2, 0.3])
+    pixels = np.sort(rng.choice(64 * 48, 300, replace=False))
+    v, u = np.divmod(pixels, 64)
+    expected = transform_points(T, camera.unproject(u, v, depth[v, u]))
+    got = backproject_pixels(camera, depth, pixels, T)
+    np.testing.assert_allclose(got, expected, atol=1e-6)  # float32 ray grid: ~1e-7 relative
+    # Re-projecting gives the pixels back.
+    back = camera.project(transform_points(np.linalg.inv(T), got))
+    np.testing.assert_allclose(back, np.column_stack([u, v]), atol=1e-3)
+
+
+def test_flying_pixels_out_of_range_and_holes_are_rejected() -> None:
+    depth = np.full((5, 8), 0.30, dtype=np.float32)
+    depth[:, 5:] = 0.60  # a depth edge between columns 4 and 5
+    depth[:, 4] = 0.45  # flying pixels smeared across it
+    depth[0, 1] = np.nan  # a hole
+    depth[4, 0] = 2.5  # beyond max depth
+    pixels = np.arange(depth.size)
+    kept = usable_depth_pixels(
+        depth, pixels, min_depth_m=0.1, max_depth_m=2.0, flying_pixel_ratio=0.03
+    )
+    expected = np.zeros((5, 8), dtype=bool)
+    expected[:, [0, 1, 2, 6, 7]] = True  # columns 3-5 touch the smeared column 4
+    expected[0, 1] = False  # the hole
+    expected[4, 0] = expected[3, 0] = expected[4, 1] = False  # out of range, and its edge
+    # Pixels next to the hole stay: NaN neighbours are ignored.
+    assert np.array_equal(kept, np.flatnonzero(expected))
+
+
+def test_isolated_paint_pixels_are_dropped_solid_regions_kept() -> None:
+    mask = np.zeros((20, 20), dtype=bool)
+    mask[5:12, 3:15] = True  # a solid stroke
+    mask[[1, 17, 18], [17, 2, 9]] = True  # scattered false positives
+    mask[15, 15:17] = True  # a pair: one neighbour each
+    kept = reject_isolated_pixels(np.flatnonzero(mask), (20, 20), min_neighbors=2)
+    expected = np.zeros_like(mask)
+    expected[5:12, 3:15] = True
+    expected[[5, 5, 11, 11], [3, 14, 3, 14]] = True  # corners keep two neighbours
+    assert np.array_equal(np.flatnonzero(expected), kept)
+    assert np.array_equal(
+        reject_isolated_pixels(np.flatnonzero(mask), (20, 20), min_neighbors=0),
+        np.flatnonzero(mask),
+    )
+
+
+# --------------------------------------------------------------------------- the recipe
+
+
+def test_exact_frame_paint_lies_on_the_stroke_and_the_surface(
+    exact_frame: Frame, reference: np.ndarray
+) -> None:
+    points, pixels, paint_pixels = backproject_paint(exact_frame, ORANGE, CONFIG)
+    assert paint_pixels > 500 and len(points) == len(pixels)
+    assert radial_error(points).max() < 1e-5  # exact depth, float32 rays
+    # Pixel-centre colours decide paint, so points reach the stroke's edge, not beyond.
+    assert PolylineDistance(reference).distance(points).max() < HALF_WIDTH + 1e-4
+    clouds = process_frame(exact_frame, ORANGE, CONFIG)
+    assert clouds.skip_reason is None
+    d = PolylineDistance(reference).distance(clouds.paint_base)
+    assert d.max() < HALF_WIDTH + CONFIG.voxel_size_m
+    # Voxel centroids of a curved surface sit a hair inside it.
+    assert radial_error(clouds.paint_base).max() < 2e-4
+
+
+def test_noisy_frame_rust_flying_pixels_and_holes_do_not_reach_the_cloud(
+    noisy_frame: Frame, reference: np.ndarray
+) -> None:
+    raw, _, _ = backproject_paint(noisy_frame, ORANGE, replace(CONFIG, min_paint_neighbors=0))
+    d_raw = PolylineDistance(reference).distance(raw)
+    assert np.mean(d_raw > HALF_WIDTH + 0.005) > 0.001  # rust does leak into the raw filter
+    clouds = process_frame(noisy_frame, ORANGE, CONFIG)
+    assert clouds.skip_reason is None and len(clouds.paint_base) > 300
+    d = PolylineDistance(reference).distance(clouds.paint_base)
+    assert d.max() < HALF_WIDTH + 0.002
+    assert radial_error(clouds.paint_base).max() < 0.003  # no flying pixel survived
+    assert clouds.valid_paint_pixels < clouds.paint_pixels  # holes and edges were dropped
+
+
+def test_flying_pixels_on_a_paint_silhouette_are_rejected() -> None:
+    ring = cylinder_ring_line(x_m=0.0, half_angle_deg=120.0)
+    noise = SceneNoise(flying_pixels=True)
+    frame = render_cylinder(small_camera(), top_view(0.0), ring, noise=noise, rust=False)
+    unfiltered = replace(CONFIG, flying_pixel_ratio=1e9)
+    raw, _, _ = backproject_paint(frame, ORANGE, unfiltered)
+    # The smeared silhouette pixels are paint-coloured; along a tangent ray 5 cm of depth
+    # error is ~1 cm off the surface.
+    assert radial_error(raw).max() > 0.008
+    clouds = process_frame(frame, ORANGE, CONFIG)
+    assert radial_error(clouds.paint_base).max() < 1e-3
+
+
+def test_surface_band_flanks_the_stroke_on_both_sides(
+    noisy_frame: Frame, reference: np.ndarray
+) -> None:
+    clouds = process_frame(noisy_frame, ORANGE, CONFIG)
+    surface = clouds.surface_base
+    assert len(surface) > 200
+    d_ref = PolylineDistance(reference).distance(surface)
+    assert d_ref.min() > HALF_WIDTH - 0.003  # not paint
+    d_paint = nearest_distances(surface, clouds.paint_base)
+    assert d_paint.max() < CONFIG.surface_band_m + 0.01  # the band is measured on a coarse grid
+    assert np.quantile(d_paint, 0.9) > CONFIG.surface_band_m / 2  # and reaches out
+    assert radial_error(surface).max() < 0.003  # on the pipe: no floor, no flying pixels
+    # Both sides of the stroke: the sign of y relative to the reference's nearest point.
+    _, nearest, _ = PolylineDistance(reference).query(surface)
+    side = np.sign(surface[:, 1] - nearest[:, 1])
+    assert np.mean(side > 0) > 0.25 and np.mean(side < 0) > 0.25
+    # Downsampled: no two surface points share a surface voxel's neighbourhood too closely.
+    assert len(surface) < clouds.valid_paint_pixels * 10
+
+
+def test_skip_reasons(reference: np.ndarray, exact_frame: Frame) -> None:
+    blue = PAINT_PRESETS["blue"].hsv
+    assert process_frame(exact_frame, blue, CONFIG).skip_reason == SKIP_NO_PAINT
+    holes = replace(exact_frame, depth=np.full_like(exact_frame.depth, np.nan))
+    clouds = process_frame(holes, ORANGE, CONFIG)
+    assert clouds.skip_reason == SKIP_NO_VALID_DEPTH
+    assert clouds.paint_pixels > 0 and clouds.valid_paint_pixels == 0
+    far = replace(CONFIG, min_paint_points=10**6)
+    assert process_frame(exact_frame, ORANGE, far).skip_reason == SKIP_TOO_LITTLE_PAINT
+    for skipped in (clouds, process_frame(exact_frame, blue, CONFIG)):
+        assert skipped.skipped and skipped.paint_base.shape == (0, 3)
+        assert skipped.surface_base.shape == (0, 3)
+
+
+def test_deterministic_and_inputs_unchanged(noisy_frame: Frame) -> None:
+    color, depth, pose = noisy_frame.color.copy(), noisy_frame.depth.copy(), noisy_frame.T_base_cam
+    pose = pose.copy()
+    a = process_frame(noisy_frame, ORANGE, CONFIG)
+    b = process_frame(noisy_frame, ORANGE, CONFIG)
+    assert a.paint_base.tobytes() == b.paint_base.tobytes()
+    assert a.surface_base.tobytes() == b.surface_base.tobytes()
+    assert np.array_equal(noisy_frame.color, color)
+    assert np.array_equal(noisy_frame.depth, depth, equal_nan=True)
+    assert np.array_equal(noisy_frame.T_base_cam, pose)
+    np.testing.assert_allclose(a.camera_position, pose[:3, 3])
+
+
+def test_backprojection_moves_with_the_base_frame(noisy_frame: Frame) -> None:
+    rng = np.random.default_rng(5)
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    G = make_transform(q * np.sign(np.linalg.det(q)), rng.normal(size=3))
+    moved = replace(noisy_frame, T_base_cam=G @ noisy_frame.T_base_cam)
+    a, pa, _ = backproject_paint(noisy_frame, ORANGE, CONFIG)
+    b, pb, _ = backproject_paint(moved, ORANGE, CONFIG)
+    assert np.array_equal(pa, pb)
+    np.testing.assert_allclose(b, transform_points(G, a), atol=1e-9)
+
+
+def test_bad_parameters_raise_naming_them(exact_frame: Frame) -> None:
+    with pytest.raises(PerceptionError, match="voxel_size_m"):
+        process_frame(exact_frame, ORANGE, replace(CONFIG, voxel_size_m=0.0))
+    with pytest.raises(PerceptionError, match="depth range"):
+        check_perception_config(replace(CONFIG, min_depth_m=3.0))
+    with pytest.raises(PerceptionError, match="surface_band_m"):
+        check_perception_config(replace(CONFIG, surface_band_m=-1.0))
+
+
+# --------------------------------------------------------------------------- tally
+
+
+def test_tally_names_the_range_and_the_hues_seen_when_no_paint(exact_frame: Frame) -> None:
+    blue = PAINT_PRESETS["blue"].hsv
+    tally = PerceptionTally(blue)
+    for _ in range(3):
+        tally.add(process_frame(exact_frame, blue, CONFIG), exact_frame.color)
+    with pytest.raises(PerceptionError) as info:
+        tally.raise_if_no_paint()
+    message = str(info.value)
+    assert "\n" not in message
+    assert "no paint found in any of 3 frames with blue (hue 190-250 deg" in message
+    assert "dominant hues seen: 30 deg" in message  # the orange stroke (26 deg)
+
+
+def test_tally_counts_and_explains_paint_without_depth(exact_frame: Frame) -> None:
+    holes = replace(exact_frame, depth=np.full_like(exact_frame.depth, np.nan))
+    tally = PerceptionTally(ORANGE)
+    tally.add(process_frame(holes, ORANGE, CONFIG), holes.color)
+    with pytest.raises(PerceptionError, match="no usable paint points"):
+        tally.raise_if_no_paint()
+    tally.add(process_frame(exact_frame, ORANGE, CONFIG), exact_frame.color)
+    tally.raise_if_no_paint()
+    counts = tally.to_dict()
+    assert counts["frames"] == 2 and counts["frames_with_paint"] == 1
+    assert counts["skip_reasons"] == {SKIP_NO_VALID_DEPTH: 1}
+    assert counts["paint_points"] > 0
+    with pytest.raises(PerceptionError, match="no usable frames"):
+        PerceptionTally(ORANGE).raise_if_no_paint()
