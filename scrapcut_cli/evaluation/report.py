@@ -1,0 +1,406 @@
+"""Table I: rows of object × method, the paper's figures beside ours, and four renderers.
+
+Renderers return text (markdown, CSV, JSON) or a rich renderable (the screen table); none of
+them prints. Figures are millimetres in every rendering; ``coverage`` stays a share (0–1) in
+the machine-readable ones and a percentage on screen and in markdown.
+
+Against the paper a figure of ours is *worse* when, rounded to the paper's two decimals, it is
+larger than the paper's (every Table I column is an error, so larger is worse, the minimum
+included). Failed fits are worse on every figure.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from scrapcut_cli.errors import EvaluationError
+from scrapcut_cli.evaluation.metrics import PathError
+
+if TYPE_CHECKING:
+    from rich.table import Table
+
+#: The Table I columns, in the paper's order.
+TABLE1_FIELDS = ("mean_mm", "sd_mm", "min_mm", "max_mm")
+_TITLES = {"mean_mm": "Mean", "sd_mm": "SD", "min_mm": "Min", "max_mm": "Max"}
+
+#: What the paper's Table I does not say in its cells (Section V-A).
+PAPER_NOTES = {("basket", "skeleton"): "20 mm leaf (5 mm broke)"}
+
+#: Marks a figure worse than the paper's.
+WORSE_MARK = "▲"
+
+
+@dataclass(frozen=True)
+class PaperFigures:
+    """One row of the paper's Table I, millimetres."""
+
+    mean_mm: float
+    sd_mm: float
+    min_mm: float
+    max_mm: float
+    note: str = ""
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "mean_mm": self.mean_mm,
+            "sd_mm": self.sd_mm,
+            "min_mm": self.min_mm,
+            "max_mm": self.max_mm,
+            "note": self.note,
+        }
+
+
+PaperTable = dict[tuple[str, str], PaperFigures]
+
+
+def load_paper_table(path: str | Path | None = None) -> PaperTable:
+    """The paper's Table I keyed by (object, method); default: the bundled copy.
+
+    The CSV has the header ``object,method,mean_mm,sd_mm,min_mm,max_mm``.
+    """
+    if path is None:
+        text = resources.files("scrapcut_cli").joinpath("data/paper_table1.csv").read_text("utf-8")
+        where = "bundled paper_table1.csv"
+    else:
+        try:
+            text = Path(path).read_text(encoding="utf-8")
+        except OSError as exc:
+            raise EvaluationError(f"cannot read the paper table {path}: {exc}") from None
+        where = str(path)
+    rows = list(csv.DictReader(io.StringIO(text)))
+    needed = {"object", "method", *TABLE1_FIELDS}
+    if not rows or not needed <= set(rows[0]):
+        raise EvaluationError(f"{where}: expected columns {', '.join(sorted(needed))}")
+    table: PaperTable = {}
+    for row in rows:
+        key = (row["object"], row["method"])
+        try:
+            values = [float(row[f]) for f in TABLE1_FIELDS]
+        except ValueError:
+            raise EvaluationError(f"{where}: non-numeric figure in the row for {key}") from None
+        mean, sd, lo, hi = values
+        table[key] = PaperFigures(mean, sd, lo, hi, note=PAPER_NOTES.get(key, ""))
+    return table
+
+
+@dataclass(frozen=True, eq=False)
+class ReportRow:
+    """One object × method result: the metric, or why there is none.
+
+    ``params`` are the method's parameters from the path file (``leaf_size_m`` for the
+    skeleton); ``note`` says anything the figures alone do not (a retry at a larger leaf);
+    ``failure`` is the one-line reason when the path could not be made; ``curve_points`` and
+    ``reference_points`` ((N, 3) metres, base frame) are kept for the plots, not rendered.
+    """
+
+    object: str
+    method: str
+    error: PathError | None
+    params: dict[str, Any] = field(default_factory=dict)
+    note: str = ""
+    failure: str | None = None
+    source: str = ""
+    curve_points: NDArray[np.float64] | None = None
+    reference_points: NDArray[np.float64] | None = None
+
+    @property
+    def leaf_size_m(self) -> float | None:
+        """The skeleton leaf size in metres, if the method has one."""
+        return leaf_size_from_params(self.params)
+
+    @property
+    def label(self) -> str:
+        """Method name, with the leaf size when there is one (``skeleton 5 mm``)."""
+        leaf = self.leaf_size_m
+        return self.method if leaf is None else f"{self.method} {_fmt_leaf(leaf)} mm"
+
+    def figures_mm(self) -> dict[str, Any] | None:
+        """The metric in millimetres (``PathError.summary_mm``), or None for a failed row."""
+        return None if self.error is None else self.error.summary_mm()
+
+
+def leaf_size_from_params(params: dict[str, Any]) -> float | None:
+    """Leaf size in metres from method parameters (``leaf_size_m`` or ``leaf_size_mm``)."""
+    for key, scale in (("leaf_size_m", 1.0), ("leaf_size_mm", 1e-3)):
+        value = params.get(key)
+        if isinstance(value, int | float) and not isinstance(value, bool):
+            return float(value) * scale
+    return None
+
+
+def sort_rows(rows: Iterable[ReportRow]) -> list[ReportRow]:
+    """Rows ordered by object, method, then leaf size (Table I's order)."""
+    return sorted(rows, key=lambda r: (r.object, r.method, r.leaf_size_m or 0.0, r.source))
+
+
+def worse_than_paper(row: ReportRow, paper: PaperFigures) -> list[str]:
+    """Names of the Table I figures (``mean_mm``...) where ``row`` is worse than the paper."""
+    figures = row.figures_mm()
+    if figures is None:
+        return list(TABLE1_FIELDS)
+    return [f for f in TABLE1_FIELDS if round(figures[f], 2) > getattr(paper, f)]
+
+
+def rows_to_records(
+    rows: Sequence[ReportRow], *, paper: PaperTable | None = None
+) -> list[dict[str, Any]]:
+    """JSON-ready dictionaries, one per row (the fixed keys of DESIGN.md first)."""
+    records = []
+    for row in sort_rows(rows):
+        figures = row.figures_mm()
+        record: dict[str, Any] = {"object": row.object, "method": row.method}
+        if figures is None:
+            record.update(dict.fromkeys((*TABLE1_FIELDS, "coverage")))
+        else:
+            record.update(figures)
+        leaf = row.leaf_size_m
+        record["leaf_size_mm"] = None if leaf is None else leaf * 1000.0
+        record["note"] = row.note
+        record["failure"] = row.failure
+        record["path"] = row.source
+        record["params"] = row.params
+        if paper is not None:
+            figures_paper = paper.get((row.object, row.method))
+            record["paper"] = None if figures_paper is None else figures_paper.as_dict()
+            record["worse_than_paper"] = (
+                None if figures_paper is None else worse_than_paper(row, figures_paper)
+            )
+        records.append(record)
+    return records
+
+
+def render_json(rows: Sequence[ReportRow], *, paper: PaperTable | None = None) -> str:
+    """A JSON list of rows (``scrapcut eval --format json``)."""
+    return json.dumps(rows_to_records(rows, paper=paper), indent=2, allow_nan=False) + "\n"
+
+
+CSV_FIELDS = (
+    "object",
+    "method",
+    "leaf_size_mm",
+    *TABLE1_FIELDS,
+    "coverage",
+    "reverse_mean_mm",
+    "reverse_max_mm",
+    "length_ratio",
+    "reference_length_mm",
+    "curve_length_mm",
+    "samples",
+    "note",
+    "failure",
+    "path",
+)
+
+
+def render_csv(rows: Sequence[ReportRow], *, paper: PaperTable | None = None) -> str:
+    """CSV, one line per row; with ``paper``, ``paper_mean_mm``... and ``worse_than_paper``."""
+    columns = list(CSV_FIELDS)
+    if paper is not None:
+        columns += [f"paper_{f}" for f in TABLE1_FIELDS] + ["worse_than_paper"]
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=columns, lineterminator="\n")
+    writer.writeheader()
+    for record in rows_to_records(rows, paper=paper):
+        line = {c: record.get(c) for c in CSV_FIELDS}
+        if paper is not None:
+            figures_paper = record["paper"] or {}
+            for f in TABLE1_FIELDS:
+                line[f"paper_{f}"] = figures_paper.get(f)
+            worse = record["worse_than_paper"]
+            line["worse_than_paper"] = "" if worse is None else ";".join(worse)
+        writer.writerow({k: _csv_value(v) for k, v in line.items()})
+    return buffer.getvalue()
+
+
+#: Columns of the screen and markdown tables (markdown inserts the paper's after each figure).
+COLUMNS = (
+    "Object",
+    "Method",
+    *(f"{_TITLES[f]} [mm]" for f in TABLE1_FIELDS),
+    "Coverage",
+    "Rev. mean [mm]",
+    "Rev. max [mm]",
+    "Length ratio",
+    "Note",
+)
+
+
+@dataclass(frozen=True)
+class TableLine:
+    """One row of the human-readable tables: formatted cells, "worse" flags, paper figures."""
+
+    cells: list[str]
+    worse: list[bool]
+    paper: list[str] | None  # the paper's mean, SD, min, max, formatted; None: not in Table I
+    paper_note: str = ""
+
+
+def table_lines(rows: Sequence[ReportRow], *, paper: PaperTable | None = None) -> list[TableLine]:
+    """The rows formatted for :data:`COLUMNS`, shared by the markdown and rich renderers."""
+    lines = []
+    for row in sort_rows(rows):
+        figures = row.figures_mm()
+        figures_paper = None if paper is None else paper.get((row.object, row.method))
+        worse = set() if figures_paper is None else set(worse_than_paper(row, figures_paper))
+        cells = [row.object, row.label]
+        cells += ["—" if figures is None else f"{figures[f]:.2f}" for f in TABLE1_FIELDS]
+        if figures is None:
+            cells += ["—"] * 4
+        else:
+            cells += [
+                f"{100.0 * figures['coverage']:.1f}%",
+                f"{figures['reverse_mean_mm']:.2f}",
+                f"{figures['reverse_max_mm']:.2f}",
+                f"{figures['length_ratio']:.3f}",
+            ]
+        notes = [n for n in (row.note, row.failure and f"failed: {row.failure}") if n]
+        cells.append("; ".join(notes))
+        flags = [False, False, *(f in worse for f in TABLE1_FIELDS)] + [False] * 5
+        lines.append(
+            TableLine(
+                cells=cells,
+                worse=flags,
+                paper=None
+                if figures_paper is None
+                else [f"{getattr(figures_paper, f):.2f}" for f in TABLE1_FIELDS],
+                paper_note="" if figures_paper is None else figures_paper.note,
+            )
+        )
+    return lines
+
+
+def paper_summary(rows: Sequence[ReportRow], paper: PaperTable) -> str:
+    """One sentence: how many shared Table I figures are worse than the paper's, and which."""
+    shared = [r for r in sort_rows(rows) if (r.object, r.method) in paper]
+    if not shared:
+        return "No object × method in common with the paper's Table I."
+    worse = [(row, worse_than_paper(row, paper[(row.object, row.method)])) for row in shared]
+    total = len(shared) * len(TABLE1_FIELDS)
+    n_worse = sum(len(w) for _, w in worse)
+    if n_worse == 0:
+        return f"All {total} shared Table I figures are at or below the paper's."
+    listing = ", ".join(
+        f"{row.object} {row.label} ({', '.join(_TITLES[f].lower() for f in w)})"
+        for row, w in worse
+        if w
+    )
+    return f"Worse than the paper on {n_worse} of {total} shared figures: {listing}."
+
+
+def render_markdown(
+    rows: Sequence[ReportRow], *, paper: PaperTable | None = None, title: str | None = None
+) -> str:
+    """A GitHub-flavoured markdown table; with ``paper``, the paper's figure follows each of
+    ours and figures worse than the paper carry ``▲``."""
+    figure_columns = range(2, 2 + len(TABLE1_FIELDS))
+    header: list[str] = []
+    for i, name in enumerate(COLUMNS):
+        header.append(name)
+        if paper is not None and i in figure_columns:
+            header.append(f"{_TITLES[TABLE1_FIELDS[i - 2]]} paper")
+    text = []
+    if title:
+        text += [f"### {title}", ""]
+    text.append("| " + " | ".join(header) + " |")
+    align = ["---", "---"] + ["---:"] * (len(header) - 3) + ["---"]
+    text.append("|" + "|".join(align) + "|")
+    for line in table_lines(rows, paper=paper):
+        cells: list[str] = []
+        for i, (cell, worse) in enumerate(zip(line.cells, line.worse, strict=True)):
+            if i == len(COLUMNS) - 1 and line.paper_note:
+                cell = "; ".join(c for c in (cell, f"paper: {line.paper_note}") if c)
+            cells.append(f"{cell} {WORSE_MARK}" if worse else cell)
+            if paper is not None and i in figure_columns:
+                cells.append("—" if line.paper is None else line.paper[i - 2])
+        text.append("| " + " | ".join(_md_escape(c) for c in cells) + " |")
+    text.append("")
+    text.append(
+        "Distances in millimetres from each reference sample (every "
+        f"{_spacing_mm(rows)} mm) to the fitted curve; coverage = share of samples within "
+        f"{_threshold_mm(rows)} mm; reverse = from the curve back to the reference."
+    )
+    if paper is not None:
+        text.append(
+            f"{WORSE_MARK} = larger (worse) than the paper's figure. " + paper_summary(rows, paper)
+        )
+    return "\n".join(text) + "\n"
+
+
+def rich_table(
+    rows: Sequence[ReportRow], *, paper: PaperTable | None = None, title: str | None = None
+) -> Table:
+    """A :class:`rich.table.Table`: our row, then the paper's figures in a dim row beneath it;
+    figures worse than the paper in red with ``▲``."""
+    from rich.table import Table
+
+    table = Table(title=title, caption=paper_summary(rows, paper) if paper is not None else None)
+    for i, name in enumerate(COLUMNS):
+        if i < len(COLUMNS) - 1:
+            header = _rich_escape(name.replace(" [", "\n["))
+            table.add_column(header, justify="right" if i >= 2 else "left", no_wrap=True)
+        else:
+            table.add_column(name, max_width=40, overflow="fold")
+    for line in table_lines(rows, paper=paper):
+        table.add_row(
+            *(
+                f"[red]{_rich_escape(c)} {WORSE_MARK}[/red]" if m else _rich_escape(c)
+                for c, m in zip(line.cells, line.worse, strict=True)
+            )
+        )
+        if line.paper is not None:
+            table.add_row(
+                "",
+                "paper",
+                *line.paper,
+                "",
+                "",
+                "",
+                "",
+                _rich_escape(line.paper_note),
+                style="dim",
+            )
+    return table
+
+
+def _fmt_leaf(leaf_m: float) -> str:
+    mm = leaf_m * 1000.0
+    return f"{mm:.0f}" if math.isclose(mm, round(mm), abs_tol=1e-6) else f"{mm:.1f}"
+
+
+def _spacing_mm(rows: Sequence[ReportRow]) -> str:
+    spacings = {r.error.sample_spacing_m for r in rows if r.error is not None}
+    return "/".join(f"{s * 1000.0:g}" for s in sorted(spacings)) or "1"
+
+
+def _threshold_mm(rows: Sequence[ReportRow]) -> str:
+    thresholds = {r.error.coverage_threshold_m for r in rows if r.error is not None}
+    return "/".join(f"{t * 1000.0:g}" for t in sorted(thresholds)) or "10"
+
+
+def _csv_value(value: Any) -> Any:
+    if value is None:
+        return ""
+    if isinstance(value, dict):
+        return json.dumps(value, sort_keys=True)
+    return value
+
+
+def _md_escape(text: str) -> str:
+    return text.replace("|", "\\|")
+
+
+def _rich_escape(text: str) -> str:
+    from rich.markup import escape
+
+    return escape(text)

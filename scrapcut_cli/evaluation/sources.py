@@ -1,0 +1,197 @@
+"""What gets evaluated: path files and references, read from disk, and the evaluation recipe.
+
+This is the evaluation's input layer (as ``recording/`` is the pipeline's): path files are
+``scrapcut.path/v1`` JSON (DESIGN.md); a reference is a recording with /scrapcut/reference or a
+CSV with the header ``x,y,z`` (metres, base frame, ordered along the curve).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from scrapcut_cli.config import EvaluationConfig, RecordingConfig
+from scrapcut_cli.errors import EvaluationError, ScrapcutError, ToolpathError
+from scrapcut_cli.evaluation.metrics import path_error
+from scrapcut_cli.evaluation.report import ReportRow
+
+
+@dataclass(frozen=True, eq=False)
+class PathFile:
+    """The parts of a path file the evaluation needs.
+
+    ``curve_points`` : (N, 3) float64, metres, base frame — the fitted curve on the surface.
+    ``source`` is the recording named in the file (as written, may be relative), or None.
+    """
+
+    path: Path
+    curve_points: NDArray[np.float64]
+    method: str
+    params: dict[str, Any]
+    frame_id: str
+    source: str | None
+
+
+@dataclass(frozen=True, eq=False)
+class Reference:
+    """A painted reference curve: ``points`` (M, 3) float64, metres, base frame, ordered.
+
+    ``object`` is the simulated object's name when the recording says it; ``origin`` the file.
+    """
+
+    points: NDArray[np.float64]
+    origin: Path
+    object: str | None = None
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+
+def load_path_file(path: str | Path) -> PathFile:
+    """Read a ``scrapcut.path/v1`` file (validated by the tool path's reader).
+
+    Raises EvaluationError naming the file when it is missing, not a path file, or malformed.
+    """
+    from scrapcut_cli.toolpath.pathfile import read_path_file
+
+    path = Path(path)
+    try:
+        curve, _, meta = read_path_file(path)
+    except ToolpathError as exc:
+        raise EvaluationError(str(exc)) from None
+    if len(curve.points) < 2:
+        raise EvaluationError(f"{path}: curve.points must hold at least two [x, y, z] points")
+    method = meta.get("method") or {}
+    params = method.get("params") if isinstance(method, dict) else None
+    source = meta.get("source")
+    source_path = source.get("path") if isinstance(source, dict) else None
+    return PathFile(
+        path=path,
+        curve_points=np.asarray(curve.points, dtype=np.float64),
+        method=curve.method,
+        params=dict(params) if isinstance(params, dict) else {},
+        frame_id=str(meta.get("frame_id", "")),
+        source=None if source_path is None else str(source_path),
+    )
+
+
+def read_reference_csv(path: str | Path) -> NDArray[np.float64]:
+    """(M, 3) reference points from a CSV with header ``x,y,z`` (metres, base frame)."""
+    path = Path(path)
+    try:
+        with path.open(encoding="utf-8") as f:
+            header = [h.strip().lower() for h in f.readline().split(",")]
+            rows = np.loadtxt(f, delimiter=",", dtype=np.float64, ndmin=2)
+    except FileNotFoundError:
+        raise EvaluationError(f"reference not found: {path}") from None
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise EvaluationError(f"cannot read reference CSV {path}: {exc}") from None
+    if header[:3] != ["x", "y", "z"]:
+        raise EvaluationError(f"reference CSV {path} must start with the header x,y,z (metres)")
+    if rows.shape[0] < 2 or rows.shape[1] < 3:
+        raise EvaluationError(f"reference CSV {path} needs at least two rows of x,y,z")
+    return np.ascontiguousarray(rows[:, :3])
+
+
+def load_reference(path: str | Path, *, config: RecordingConfig | None = None) -> Reference:
+    """A reference from a CSV (``.csv``) or from a recording's /scrapcut/reference."""
+    path = Path(path)
+    if path.suffix.lower() == ".csv":
+        return Reference(points=read_reference_csv(path), origin=path)
+    if not path.exists():
+        raise EvaluationError(f"reference recording not found: {path}")
+    from scrapcut_cli.recording.reader import open_recording
+
+    with open_recording(path, config) as rec:
+        points = rec.reference()
+        metadata = dict(rec.metadata.get("scrapcut", {}))
+    if points is None or len(points) < 2:
+        raise EvaluationError(
+            f"{path} has no /scrapcut/reference; pass --reference with a recording or CSV x,y,z"
+        )
+    name = metadata.get("object")
+    return Reference(
+        points=np.asarray(points, dtype=np.float64),
+        origin=path,
+        object=str(name) if name else None,
+        metadata=metadata,
+    )
+
+
+def resolve_source(path_file: PathFile) -> Path:
+    """The recording a path file names: as written, else relative to the path file's folder."""
+    if path_file.source is None:
+        raise EvaluationError(
+            f"{path_file.path} names no source recording; pass --reference REC|CSV"
+        )
+    source = Path(path_file.source)
+    candidates = [source]
+    if not source.is_absolute():
+        candidates.append(path_file.path.parent / source)
+        candidates.append(path_file.path.parent / source.name)
+    for candidate in candidates:
+        if candidate.exists():
+            return candidate
+    raise EvaluationError(
+        f"{path_file.path}: its recording {path_file.source} was not found; "
+        "pass --reference REC|CSV"
+    )
+
+
+def evaluate_path_files(
+    paths: Sequence[str | Path],
+    *,
+    reference: str | Path | None = None,
+    config: EvaluationConfig | None = None,
+    recording_config: RecordingConfig | None = None,
+) -> list[ReportRow]:
+    """Evaluate path files: each against ``reference`` or the recording it names.
+
+    A recording named by several path files is read once. The object name is the recording's
+    ``metadata["scrapcut"]["object"]``, else the path file's stem.
+    """
+    if not paths:
+        raise EvaluationError("no path files given")
+    config = EvaluationConfig() if config is None else config
+    cache: dict[Path, Reference] = {}
+    shared = None if reference is None else load_reference(reference, config=recording_config)
+    rows = []
+    for p in paths:
+        path_file = load_path_file(p)
+        if shared is not None:
+            ref = shared
+        else:
+            origin = resolve_source(path_file).resolve()
+            if origin not in cache:
+                cache[origin] = load_reference(origin, config=recording_config)
+            ref = cache[origin]
+        rows.append(evaluate_path_file(path_file, ref, config=config))
+    return rows
+
+
+def evaluate_path_file(
+    path_file: PathFile,
+    reference: Reference,
+    *,
+    config: EvaluationConfig,
+    object_name: str | None = None,
+    note: str = "",
+) -> ReportRow:
+    """One report row: ``path_file``'s curve against ``reference``."""
+    try:
+        error = path_error(path_file.curve_points, reference.points, config=config)
+    except ScrapcutError as exc:
+        raise EvaluationError(f"{path_file.path}: {exc}") from None
+    return ReportRow(
+        object=object_name or reference.object or path_file.path.stem,
+        method=path_file.method,
+        error=error,
+        params=path_file.params,
+        note=note,
+        source=str(path_file.path),
+        curve_points=path_file.curve_points,
+        reference_points=reference.points,
+    )
