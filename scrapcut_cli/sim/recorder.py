@@ -1,0 +1,756 @@
+"""The recorder: drive the Panda through a planner's views, render, and write an MCAP.
+
+One loop serves every mode (exploration.decision's contract)::
+
+    decision = planner.start()
+    while not decision.stop:
+        execute decision.T_base_cam (IK, free DOFs, collisions)  -> or skip it
+        move there (joint-space minimum-jerk motion, /tf and /joint_states at tf_rate_hz)
+        rest, capture frames_per_view images, write them
+        decision = planner.observe(frame)   # the view's last image, exactly as a reader reads it
+
+What is written (DESIGN.md, realsense-ros 4.x names)
+----------------------------------------------------
+* ``/camera/camera/color/image_raw`` rgb8, ``/camera/camera/aligned_depth_to_color/image_raw``
+  16UC1 mm (0 = invalid; or 32FC1 m), ``/camera/camera/color/camera_info`` with every image.
+* ``/tf``: panda_link0 -> panda_link1 -> ... -> panda_link8 at ``tf_rate_hz`` (100 Hz) along
+  the whole motion, not only at image stamps; ``/joint_states`` at the same rate.
+* ``/tf_static``: two messages from two "publishers" with stamps seconds before the recording
+  starts, as latched topics arrive in a real bag: robot_state_publisher's
+  panda_link8 -> panda_hand, and the camera's panda_hand -> camera_link ->
+  camera_color_optical_frame (the NOMINAL hand-eye calibration).
+* ``/scrapcut/reference`` (nav_msgs/Path, panda_link0), ``/scrapcut/exploration``
+  (std_msgs/String JSON per decision, explore mode only).
+* MCAP metadata ``scrapcut`` (object, mode, noise, paint, stroke_width_m, seed, tool_version,
+  params = JSON of everything used) and ``scrapcut_result`` (counts of this run).
+
+Header stamps are the truth. Log times trail them like a real bag's receive times: images by
+20–40 ms, /tf and /joint_states by 0.3–2 ms (seeded), and messages are written in log-time
+order, so a reader that sorts by log time instead of header stamp gets wrong poses.
+The simulated clock starts at :data:`START_NS`; nothing depends on the wall clock, so the same
+configuration and seed give the same bytes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import heapq
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from scrapcut_cli import __version__
+from scrapcut_cli.config import SimConfig
+from scrapcut_cli.errors import SimError
+from scrapcut_cli.exploration.decision import Decision, Reachability, ViewPlanner
+from scrapcut_cli.geometry import matrix_to_quat_xyzw
+from scrapcut_cli.recording.frame import CameraModel, Frame
+from scrapcut_cli.sim.camera import (
+    BASE_FRAME,
+    CAMERA_LINK,
+    FLANGE_FRAME,
+    HAND_FRAME,
+    OPTICAL_FRAME,
+    T_CAMLINK_OPTICAL,
+    T_HAND_CAMLINK,
+    NoisePreset,
+    d435i_color_camera,
+    depth_to_millimetres,
+    draw_lighting,
+    noise_preset,
+    perturb_hand_eye,
+    simulate_color,
+    simulate_depth,
+)
+from scrapcut_cli.sim.objects import ScrapObject, make_object
+from scrapcut_cli.sim.robot import (
+    FINGER_OPENING_M,
+    LINK_NAMES,
+    Q_READY,
+    PandaSim,
+    RobotLimits,
+    joint_names,
+)
+from scrapcut_cli.sim.surface import OVERSPRAY_PRESETS, PaintStroke
+
+FloatArray = NDArray[np.float64]
+
+COLOR_TOPIC = "/camera/camera/color/image_raw"
+DEPTH_TOPIC = "/camera/camera/aligned_depth_to_color/image_raw"
+INFO_TOPIC = "/camera/camera/color/camera_info"
+JOINT_STATES_TOPIC = "/joint_states"
+REFERENCE_TOPIC = "/scrapcut/reference"
+EXPLORATION_TOPIC = "/scrapcut/exploration"
+
+MODES = ("sweep", "survey", "explore")
+DEPTH_ENCODINGS = ("16UC1", "32FC1")
+
+#: Simulated clock at the start of every recording: 2023-11-14 22:13:20 UTC.
+START_NS = 1_700_000_000 * 1_000_000_000
+
+#: Timing of a view (seconds): settle after the motion stops (assumed: the Panda's tracking
+#: error decays within ~0.2 s), then images at the D435i's 30 Hz frame rate; the first image
+#: comes up to 5 ms after settling (the camera's own frame clock, not synchronised).
+SETTLE_S = 0.25
+FRAME_PERIOD_S = 1.0 / 30.0
+POST_CAPTURE_S = 0.05
+MIN_MOVE_S = 0.4
+INITIAL_REST_S = 0.5
+FINAL_REST_S = 0.3
+#: Peak speed of a minimum-jerk profile is 1.875 × its mean speed.
+MIN_JERK_PEAK = 1.875
+
+# Independent random streams: numpy Generators seeded by (seed, stream, index...).
+_STREAM_HAND_EYE, _STREAM_LATENCY, _STREAM_LIGHT, _STREAM_SENSOR, _STREAM_STAMP = range(5)
+
+
+@dataclass(frozen=True)
+class RecordResult:
+    """What a recording run did.
+
+    ``views`` executed views, ``frames`` colour/depth pairs written, ``infeasible_views``
+    views the robot could not reach even with the free DOFs (skipped), ``adjusted_views``
+    views that needed a roll or back-off, ``collisions`` executed views whose true robot and
+    camera pose touched the piece or floor (0 by construction; recounted as a check),
+    ``motion_collisions`` joint-space moves between views that pass through an obstacle,
+    ``camera_travel_m`` length of the camera's path, ``duration_s`` simulated time,
+    ``wall_time_s`` real time.
+    """
+
+    path: Path
+    object: str
+    mode: str
+    noise: str
+    seed: int
+    views: int
+    frames: int
+    infeasible_views: int
+    adjusted_views: int
+    collisions: int
+    motion_collisions: int
+    camera_travel_m: float
+    duration_s: float
+    wall_time_s: float
+    stop_reason: str
+    view_log: tuple[dict[str, Any], ...] = ()
+
+
+@dataclass(frozen=True, eq=False)
+class SimContext:
+    """What a closed-loop planner may use from the simulator (explore mode).
+
+    ``start_view`` is the worker's initial segment: a view of the middle of the painted line.
+    ``reachable(T_base_cam)`` answers with IK, joint limits and collisions against the true
+    piece and floor, from the robot's current joints.
+    """
+
+    config: SimConfig
+    camera: CameraModel
+    reachable: Reachability
+    start_view: FloatArray
+    object_name: str
+
+
+PlannerFactory = Callable[[SimContext], ViewPlanner]
+
+
+@runtime_checkable
+class SkippingPlanner(Protocol):
+    """A planner that can be told its last view was infeasible (pre-planned sweeps do)."""
+
+    def skip(self, reason: str) -> Decision: ...
+
+
+def validate(config: SimConfig) -> None:
+    """Raise SimError naming the first bad simulator parameter."""
+    from scrapcut_cli.perception.paint import PAINT_PRESETS
+    from scrapcut_cli.sim.objects import list_objects
+
+    names = [name for name, _ in list_objects()]
+    if config.object not in names:
+        raise SimError(f"unknown object {config.object!r}; objects: {', '.join(names)}")
+    noise_preset(config.noise)
+    if config.mode not in MODES:
+        raise SimError(f"unknown mode {config.mode!r}; modes: {', '.join(MODES)}")
+    if config.paint not in PAINT_PRESETS:
+        raise SimError(
+            f"unknown paint preset {config.paint!r}; presets: {', '.join(PAINT_PRESETS)}"
+        )
+    if config.depth_encoding not in DEPTH_ENCODINGS:
+        raise SimError(
+            f"unknown depth encoding {config.depth_encoding!r}; "
+            f"encodings: {', '.join(DEPTH_ENCODINGS)}"
+        )
+    checks = [
+        (config.width > 0 and config.height > 0, f"resolution {config.width}x{config.height}"),
+        (config.stroke_width_m > 0, f"stroke width {config.stroke_width_m} m"),
+        (config.view_distance_m > 0, f"view distance {config.view_distance_m} m"),
+        (config.view_step_m > 0, f"view step {config.view_step_m} m"),
+        (config.survey_spacing_m > 0, f"survey spacing {config.survey_spacing_m} m"),
+        (config.views >= 0, f"views {config.views}"),
+        (config.frames_per_view >= 1, f"frames per view {config.frames_per_view}"),
+        (config.max_views >= 1, f"max views {config.max_views}"),
+        (config.max_backoff_m >= 0, f"max back-off {config.max_backoff_m} m"),
+        (0 < config.speed_scale <= 1, f"speed scale {config.speed_scale} (0-1]"),
+        (config.tf_rate_hz > 0, f"tf rate {config.tf_rate_hz} Hz"),
+        (0 <= config.min_elevation_deg < 90, f"min elevation {config.min_elevation_deg} deg"),
+    ]
+    for ok, what in checks:
+        if not ok:
+            raise SimError(f"invalid simulator parameter: {what}")
+
+
+def place_object(config: SimConfig) -> ScrapObject:
+    """The configured piece at the configured placement."""
+    return make_object(
+        config.object,
+        seed=config.seed,
+        placement=(config.object_x_m, config.object_y_m, config.object_yaw_deg),
+    )
+
+
+def planned_views(
+    config: SimConfig,
+    obj: ScrapObject,
+    *,
+    reachable: Callable[[FloatArray], bool] | None = None,
+) -> list[FloatArray]:
+    """The pre-planned views of ``sweep`` or ``survey`` mode (survey keeps ``reachable`` ones)."""
+    from scrapcut_cli.sim.views import survey_views, sweep_views
+
+    if config.mode == "sweep":
+        return sweep_views(
+            obj,
+            distance_m=config.view_distance_m,
+            step_m=config.view_step_m,
+            count=config.views,
+            min_elevation_deg=config.min_elevation_deg,
+        )
+    if config.mode == "survey":
+        return survey_views(
+            obj,
+            distance_m=config.view_distance_m,
+            spacing_m=config.survey_spacing_m,
+            count=config.views,
+            reachable=reachable,
+        )
+    raise SimError(f"mode {config.mode!r} has no pre-planned views")
+
+
+def record(
+    config: SimConfig,
+    out_path: str | Path,
+    *,
+    planner: ViewPlanner | None = None,
+    planner_factory: PlannerFactory | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> RecordResult:
+    """Simulate a scan of ``config.object`` and write it to ``out_path`` (MCAP, atomically).
+
+    ``sweep`` and ``survey`` plan their views themselves; ``explore`` needs a closed-loop
+    planner: ``planner``, or ``planner_factory(context)`` when it needs the simulator's
+    ``reachable`` callback. A planner given in another mode drives the loop instead of the
+    mode's own views. ``progress(done, total)`` is called after every decided view.
+    """
+    from scrapcut_cli.perception.paint import PAINT_PRESETS
+    from scrapcut_cli.recording.writer import McapWriter
+    from scrapcut_cli.sim.render import SceneRenderer
+    from scrapcut_cli.sim.views import PrePlannedPlanner, sweep_views
+
+    wall_start = time.perf_counter()
+    validate(config)
+    if config.mode == "explore" and planner is None and planner_factory is None:
+        raise SimError("explore mode needs the exploration planner (issue 7); use sweep or survey")
+    obj = place_object(config)
+    preset = noise_preset(config.noise)
+    camera = d435i_color_camera(config.width, config.height)
+    T_hand_camlink_true = T_HAND_CAMLINK
+    if preset.hand_eye_translation_m > 0 or preset.hand_eye_rotation_deg > 0:
+        T_hand_camlink_true = perturb_hand_eye(
+            T_HAND_CAMLINK, preset, _rng(config.seed, _STREAM_HAND_EYE)
+        )
+    overspray = OVERSPRAY_PRESETS[preset.overspray]
+    stroke = PaintStroke(
+        obj.reference,
+        width_m=config.stroke_width_m,
+        rgb=PAINT_PRESETS[config.paint].rgb,
+        overspray=overspray,
+        seed=config.seed,
+    )
+    renderer = SceneRenderer(obj, stroke, seed=config.seed)
+    limits = RobotLimits(max_backoff_m=config.max_backoff_m)
+
+    with (
+        PandaSim(
+            obj.mesh,
+            T_hand_camlink_nominal=T_HAND_CAMLINK,
+            T_hand_camlink_true=T_hand_camlink_true,
+            limits=limits,
+        ) as robot,
+        McapWriter(out_path) as writer,
+    ):
+        session = _Session(writer, robot, renderer, camera, preset, config)
+        active: ViewPlanner
+        if planner is not None:
+            active = planner
+        elif planner_factory is None:
+            views = planned_views(
+                config, obj, reachable=lambda T: robot.plan_view(T, Q_READY).feasible
+            )
+            active = PrePlannedPlanner(views, reason=config.mode)
+        else:
+            middle = sweep_views(
+                obj,
+                distance_m=config.view_distance_m,
+                count=1,
+                min_elevation_deg=config.min_elevation_deg,
+            )[0]
+            context = SimContext(
+                config=config,
+                camera=camera,
+                reachable=lambda T: robot.reachable(T, session.q),
+                start_view=middle,
+                object_name=obj.name,
+            )
+            active = planner_factory(context)
+        total = int(getattr(active, "total", config.max_views))
+        params = _params(config, preset, camera, T_hand_camlink_true, limits, stroke)
+        writer.add_metadata("scrapcut", _metadata(config, params))
+        session.start(obj.reference)
+        stop_reason = session.run(active, total, progress)
+        session.finish()
+        result = RecordResult(
+            path=Path(out_path),
+            object=obj.name,
+            mode=config.mode,
+            noise=config.noise,
+            seed=config.seed,
+            views=session.views,
+            frames=session.frames,
+            infeasible_views=session.infeasible,
+            adjusted_views=session.adjusted,
+            collisions=session.collisions,
+            motion_collisions=session.motion_collisions,
+            camera_travel_m=session.travel_m,
+            duration_s=(session.t_ns - START_NS) / 1e9,
+            wall_time_s=0.0,
+            stop_reason=stop_reason,
+            view_log=tuple(session.log),
+        )
+        writer.add_metadata("scrapcut_result", _result_metadata(result))
+    return dataclasses.replace(result, wall_time_s=time.perf_counter() - wall_start)
+
+
+# --------------------------------------------------------------------------- the session
+
+
+class _Session:
+    """Simulated clock, robot state and the log-time-ordered message queue of one recording."""
+
+    def __init__(
+        self,
+        writer: Any,
+        robot: PandaSim,
+        renderer: Any,
+        camera: CameraModel,
+        preset: NoisePreset,
+        config: SimConfig,
+    ) -> None:
+        self.writer = writer
+        self.robot = robot
+        self.renderer = renderer
+        self.camera = camera
+        self.preset = preset
+        self.config = config
+        self.q = np.asarray(Q_READY, dtype=np.float64)
+        self.t_ns = START_NS
+        self.dt_ns = round(1e9 / config.tf_rate_hz)
+        self._next_sample = 0  # index of the next /tf sample on the fixed grid
+        self._queue: list[tuple[int, int, Callable[[], None]]] = []
+        self._seq = 0
+        self._latency = _rng(config.seed, _STREAM_LATENCY)
+        self.views = self.frames = self.infeasible = self.adjusted = 0
+        self.collisions = self.motion_collisions = 0
+        self.travel_m = 0.0
+        self.log: list[dict[str, Any]] = []
+        self._names = list(joint_names())
+
+    # ------------------------------------------------------------------ message queue
+
+    def _emit(self, log_ns: int, write: Callable[[], None]) -> None:
+        heapq.heappush(self._queue, (int(log_ns), self._seq, write))
+        self._seq += 1
+
+    def _flush(self, upto_ns: int | None = None) -> None:
+        """Write queued messages logged up to ``upto_ns`` (all if None), in log-time order."""
+        while self._queue and (upto_ns is None or self._queue[0][0] <= upto_ns):
+            _, _, write = heapq.heappop(self._queue)
+            write()
+
+    def _delay_ns(self, low_ms: float, high_ms: float) -> int:
+        return round(self._latency.uniform(low_ms, high_ms) * 1e6)
+
+    # ------------------------------------------------------------------ timeline
+
+    def start(self, reference: FloatArray) -> None:
+        """Static transforms, the reference, and the robot at rest before the first move."""
+        w = self.writer
+        robot = self.robot
+        hand = [(FLANGE_FRAME, HAND_FRAME, robot.kin.T_link8_hand)]
+        camera = [
+            (HAND_FRAME, CAMERA_LINK, robot.T_hand_camlink),
+            (CAMERA_LINK, OPTICAL_FRAME, T_CAMLINK_OPTICAL),
+        ]
+        t0 = self.t_ns
+        # Latched topics published long before the recorder started (different publishers).
+        stamp_hand, stamp_camera = t0 - 4_200_000_000, t0 - 1_700_000_000
+        log_hand, log_camera = t0 + self._delay_ns(1, 5), t0 + self._delay_ns(1, 5)
+        self._emit(
+            log_hand, lambda: w.write_tf(stamp_hand, hand, static=True, log_time_ns=log_hand)
+        )
+        self._emit(
+            log_camera,
+            lambda: w.write_tf(stamp_camera, camera, static=True, log_time_ns=log_camera),
+        )
+        log_ref = t0 + self._delay_ns(1, 5)
+        ref = np.asarray(reference, dtype=np.float64)
+        self._emit(
+            log_ref,
+            lambda: w.write_path(REFERENCE_TOPIC, t0, BASE_FRAME, ref, log_time_ns=log_ref),
+        )
+        self._rest(INITIAL_REST_S)
+
+    def _publish_states(self, stamps: NDArray[np.int64], qs: FloatArray) -> None:
+        """/tf (link0 -> ... -> link8) and /joint_states at each sample."""
+        if len(stamps) == 0:
+            return
+        chains = self.robot.kin.chain(qs)  # (S, 8, 4, 4)
+        # One vectorised rotation-to-quaternion call for every sample (messages.tf_msg converts
+        # per transform, ~0.3 ms each: 80 % of a recording's time at 100 Hz).
+        quats = matrix_to_quat_xyzw(chains[:, :, :3, :3].reshape(-1, 3, 3)).reshape(-1, 8, 4)
+        w = self.writer
+        names = self._names
+        for stamp, q, chain, quat in zip(stamps.tolist(), qs, chains, quats, strict=True):
+            msg = _tf_message(stamp, chain[:, :3, 3], quat)
+            positions = np.concatenate([q, [FINGER_OPENING_M, FINGER_OPENING_M]])
+            log_tf = stamp + self._delay_ns(0.3, 2.0)
+            log_js = stamp + self._delay_ns(0.3, 2.0)
+            self._emit(
+                log_tf,
+                functools.partial(w.write_message, "/tf", TF_MESSAGE, msg, log_time_ns=log_tf),
+            )
+            self._emit(
+                log_js,
+                functools.partial(
+                    w.write_joint_state,
+                    JOINT_STATES_TOPIC,
+                    stamp,
+                    names,
+                    positions,
+                    log_time_ns=log_js,
+                ),
+            )
+
+    def _samples_until(self, end_ns: int) -> NDArray[np.int64]:
+        """Grid stamps in [current time, end_ns) not yet published."""
+        first = self._next_sample
+        last = (end_ns - START_NS - 1) // self.dt_ns  # last grid index strictly before end
+        if last < first:
+            return np.zeros(0, dtype=np.int64)
+        self._next_sample = last + 1
+        return START_NS + self.dt_ns * np.arange(first, last + 1, dtype=np.int64)
+
+    def _rest(self, duration_s: float) -> None:
+        end = self.t_ns + round(duration_s * 1e9)
+        stamps = self._samples_until(end)
+        self._publish_states(stamps, np.repeat(self.q[None, :], len(stamps), axis=0))
+        self.t_ns = end
+        self._flush(self.t_ns)
+
+    def _move(self, q_target: FloatArray) -> None:
+        """Minimum-jerk joint motion to ``q_target`` at the configured share of joint speeds."""
+        q0 = self.q
+        delta = q_target - q0
+        vmax = self.config.speed_scale * self.robot.kin.velocity
+        duration = max(MIN_MOVE_S, float(np.max(MIN_JERK_PEAK * np.abs(delta) / vmax)))
+        start, end = self.t_ns, self.t_ns + round(duration * 1e9)
+        stamps = self._samples_until(end)
+        tau = (stamps - start).astype(np.float64) / (end - start)
+        qs = q0 + _min_jerk(tau)[:, None] * delta
+        self._publish_states(stamps, qs)
+        fine = q0 + _min_jerk(np.linspace(0.0, 1.0, 101))[:, None] * delta
+        positions = self.robot.camera_poses(fine)[:, :3, 3]
+        self.travel_m += float(np.linalg.norm(np.diff(positions, axis=0), axis=1).sum())
+        self.q = np.asarray(q_target, dtype=np.float64)
+        self.t_ns = end
+        self._flush(self.t_ns)
+
+    # ------------------------------------------------------------------ views
+
+    def run(
+        self, planner: ViewPlanner, total: int, progress: Callable[[int, int], None] | None
+    ) -> str:
+        """The recorder loop; returns why it stopped."""
+        decision = planner.start()
+        decided = 0
+        explore = self.config.mode == "explore"
+        while not decision.stop:
+            if self.views >= self.config.max_views:
+                return "budget"
+            if decision.T_base_cam is None:
+                raise SimError(f"the planner gave no camera pose for {decision.reason!r}")
+            decided += 1
+            solution = self.robot.plan_view(decision.T_base_cam, self.q)
+            entry: dict[str, Any] = {
+                "decision": decision.reason,
+                "feasible": solution.feasible,
+                "reason": solution.reason,
+                "attempts": solution.attempts,
+            }
+            if not solution.feasible:
+                self.infeasible += 1
+                self.log.append(entry)
+                if progress is not None:
+                    progress(decided, max(total, decided))
+                if isinstance(planner, SkippingPlanner):
+                    decision = planner.skip(solution.reason)
+                    continue
+                return f"infeasible view ({solution.reason})"
+            assert solution.q is not None
+            if solution.roll_rad != 0.0 or solution.backoff_m > 0.0:
+                self.adjusted += 1
+            blocked = self.robot.path_collision(self.q, solution.q)
+            if blocked is not None:
+                self.motion_collisions += 1
+            self._move(solution.q)
+            # Recheck the executed pose with the TRUE hand-eye (the housing sits there).
+            touching = self.robot.collision(solution.q)
+            if touching is not None:
+                self.collisions += 1
+            frame = self._capture()
+            entry.update(
+                view=self.views - 1,
+                stamp_ns=frame.stamp_ns,
+                roll_deg=round(float(np.degrees(solution.roll_rad)), 3),
+                backoff_m=solution.backoff_m,
+                collision=touching,
+                motion_collision=blocked,
+            )
+            self.log.append(entry)
+            decision = planner.observe(frame)
+            if explore:
+                self._log_decision(decision, len(self.log))
+            if progress is not None:
+                progress(decided, max(total, decided))
+        return decision.reason
+
+    def _capture(self) -> Frame:
+        """Rest at the current joints, render the view and write ``frames_per_view`` images."""
+        cfg = self.config
+        view = self.views
+        self.views += 1
+        T_nominal = self.robot.camera_pose(self.q)
+        T_true = self.robot.camera_pose(self.q, true=True)
+        lighting = draw_lighting(self.preset, _rng(cfg.seed, _STREAM_LIGHT, view))
+        rendered = self.renderer.render(T_true, self.camera, lighting=lighting)
+        jitter = _rng(cfg.seed, _STREAM_STAMP, view).uniform(0.0, 0.005)
+        first = self.t_ns + round((SETTLE_S + jitter) * 1e9)
+        rest = SETTLE_S + jitter + cfg.frames_per_view * FRAME_PERIOD_S + POST_CAPTURE_S
+        frame: Frame | None = None
+        for k in range(cfg.frames_per_view):
+            stamp = first + round(k * FRAME_PERIOD_S * 1e9)
+            rng = _rng(cfg.seed, _STREAM_SENSOR, view, k)
+            depth_m = simulate_depth(rendered.depth, rendered.cos_incidence, self.preset, rng)
+            color = simulate_color(rendered.color, self.preset, rng)
+            depth_msg, depth_read = _encode_depth(depth_m, cfg.depth_encoding)
+            self._write_images(stamp, color, depth_msg)
+            self.frames += 1
+            frame = Frame(
+                index=self.frames - 1,
+                stamp_ns=stamp,
+                color=color,
+                depth=depth_read,
+                camera=self.camera,
+                T_base_cam=T_nominal.copy(),
+                extras={"view": view, "T_base_cam_true": T_true},
+            )
+        self._rest(rest)
+        assert frame is not None
+        return frame
+
+    def _write_images(self, stamp: int, color: NDArray[np.uint8], depth: NDArray[Any]) -> None:
+        w = self.writer
+        camera = self.camera
+        log_color = stamp + self._delay_ns(20.0, 40.0)
+        log_depth = stamp + self._delay_ns(20.0, 40.0)
+        log_info = log_color + self._delay_ns(0.05, 0.5)
+        self._emit(
+            log_color,
+            lambda: w.write_image(COLOR_TOPIC, stamp, OPTICAL_FRAME, color, log_time_ns=log_color),
+        )
+        self._emit(
+            log_depth,
+            lambda: w.write_image(DEPTH_TOPIC, stamp, OPTICAL_FRAME, depth, log_time_ns=log_depth),
+        )
+        self._emit(
+            log_info, lambda: w.write_camera_info(INFO_TOPIC, stamp, camera, log_time_ns=log_info)
+        )
+
+    def _log_decision(self, decision: Decision, step: int) -> None:
+        entry = {"step": step, "stamp_ns": self.t_ns, "reason": decision.reason}
+        entry["stop"] = decision.stop
+        entry.update(decision.info)
+        text = json.dumps(entry, sort_keys=True, default=_json_default)
+        stamp = self.t_ns
+        self._emit(stamp, lambda: self.writer.write_string(EXPLORATION_TOPIC, stamp, text))
+
+    def finish(self) -> None:
+        self._rest(FINAL_REST_S)
+        self._flush()
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+TF_MESSAGE = "tf2_msgs/msg/TFMessage"
+
+
+def _tf_message(stamp_ns: int, translations: FloatArray, quats_xyzw: FloatArray) -> Any:
+    """tf2_msgs/TFMessage of the arm chain link0 -> link1 ... link7 -> link8 at one stamp."""
+    from scrapcut_cli.recording import messages as m
+
+    types = m.typestore().types
+    transform_stamped = types["geometry_msgs/msg/TransformStamped"]
+    transform = types["geometry_msgs/msg/Transform"]
+    vector = types["geometry_msgs/msg/Vector3"]
+    quaternion = types["geometry_msgs/msg/Quaternion"]
+    items = []
+    for k, (t, q) in enumerate(zip(translations.tolist(), quats_xyzw.tolist(), strict=True)):
+        items.append(
+            transform_stamped(
+                header=m.header(stamp_ns, LINK_NAMES[k]),
+                child_frame_id=LINK_NAMES[k + 1],
+                transform=transform(
+                    translation=vector(x=t[0], y=t[1], z=t[2]),
+                    rotation=quaternion(x=q[0], y=q[1], z=q[2], w=q[3]),
+                ),
+            )
+        )
+    return types[TF_MESSAGE](transforms=items)
+
+
+def _rng(seed: int, *stream: int) -> np.random.Generator:
+    """An independent generator per (seed, stream, index...): draws never shift each other."""
+    return np.random.default_rng([int(seed) & 0xFFFFFFFF, *stream])
+
+
+def _min_jerk(tau: ArrayLike) -> FloatArray:
+    """Minimum-jerk progress 10τ³ − 15τ⁴ + 6τ⁵ (zero speed and acceleration at both ends)."""
+    t = np.clip(np.asarray(tau, dtype=np.float64), 0.0, 1.0)
+    return np.asarray(t**3 * (10.0 - 15.0 * t + 6.0 * t * t))
+
+
+def _encode_depth(
+    depth_m: NDArray[np.float32], encoding: str
+) -> tuple[NDArray[Any], NDArray[np.float32]]:
+    """(what is written, what a reader decodes from it) for a float depth image."""
+    if encoding == "32FC1":
+        written = np.where(np.isfinite(depth_m), depth_m, 0.0).astype(np.float32)
+        read = written.copy()
+        read[read <= 0] = np.nan
+        return written, read
+    mm = depth_to_millimetres(depth_m)
+    read = mm.astype(np.float32)
+    read *= np.float32(0.001)
+    read[mm == 0] = np.nan
+    return mm, read
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+def _strict_json(value: Any) -> Any:
+    """``value`` with numpy types as Python ones and non-finite floats as strings ("inf"), so
+    the metadata is strict JSON (Foxglove's JSON.parse rejects Infinity)."""
+    if isinstance(value, dict):
+        return {str(k): _strict_json(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_strict_json(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _strict_json(value.tolist())
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return str(value)
+    return value
+
+
+def _params(
+    config: SimConfig,
+    preset: NoisePreset,
+    camera: CameraModel,
+    T_hand_camlink_true: FloatArray,
+    limits: RobotLimits,
+    stroke: PaintStroke,
+) -> dict[str, Any]:
+    return {
+        "sim": dataclasses.asdict(config),
+        "noise_preset": dataclasses.asdict(preset),
+        "camera": dataclasses.asdict(camera),
+        "hand_eye_nominal": T_HAND_CAMLINK.tolist(),
+        "hand_eye_true": np.asarray(T_hand_camlink_true).tolist(),
+        "robot": dataclasses.asdict(limits),
+        "stroke": {
+            "width_m": stroke.width_m,
+            "rgb": [round(float(c) * 255) for c in stroke.rgb],
+            "max_half_width_m": stroke.max_half_width_m,
+            "min_half_width_m": stroke.min_half_width_m,
+            "overspray": dataclasses.asdict(stroke.overspray),
+        },
+        "timing_s": {
+            "settle": SETTLE_S,
+            "frame_period": FRAME_PERIOD_S,
+            "min_move": MIN_MOVE_S,
+        },
+        "start_ns": START_NS,
+    }
+
+
+def _metadata(config: SimConfig, params: dict[str, Any]) -> dict[str, str]:
+    return {
+        "object": config.object,
+        "mode": config.mode,
+        "noise": config.noise,
+        "paint": config.paint,
+        "stroke_width_m": repr(float(config.stroke_width_m)),
+        "seed": str(config.seed),
+        "tool_version": __version__,
+        "params": json.dumps(_strict_json(params), sort_keys=True, allow_nan=False),
+    }
+
+
+def _result_metadata(result: RecordResult) -> dict[str, str]:
+    keys = (
+        "views",
+        "frames",
+        "infeasible_views",
+        "adjusted_views",
+        "collisions",
+        "motion_collisions",
+        "camera_travel_m",
+        "duration_s",
+        "stop_reason",
+    )
+    return {k: str(getattr(result, k)) for k in keys}

@@ -1,0 +1,99 @@
+"""Tests of ``scrapcut record`` through click's CliRunner."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from click.testing import CliRunner
+
+from scrapcut_cli.cli import cli
+from scrapcut_cli.recording.reader import open_recording
+from scrapcut_cli.sim import list_objects
+
+
+def _reject(constant: str) -> None:
+    raise AssertionError(f"metadata is not strict JSON: {constant}")
+
+
+def test_object_list_prints_every_piece() -> None:
+    result = CliRunner().invoke(cli, ["record", "--object", "list"])
+    assert result.exit_code == 0, result.output
+    for name, _ in list_objects():
+        assert name in result.output
+
+
+def test_record_writes_a_readable_mcap_with_the_options_applied(tmp_path: Path) -> None:
+    out = tmp_path / "box.mcap"
+    args = [
+        "record",
+        "--object",
+        "planar_box",
+        "--noise",
+        "ideal",
+        "--paint",
+        "green",
+        "--seed",
+        "9",
+        "--width",
+        "48",
+        "--height",
+        "36",
+        "--views",
+        "2",
+        "--stroke-width-mm",
+        "30",
+        "--distance-mm",
+        "320",
+        "--depth-encoding",
+        "32FC1",
+        "-o",
+        str(out),
+    ]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    assert "views executed" in result.output
+    with open_recording(out) as rec:
+        meta = rec.metadata["scrapcut"]
+        assert (meta["object"], meta["noise"], meta["paint"], meta["seed"]) == (
+            "planar_box",
+            "ideal",
+            "green",
+            "9",
+        )
+        params = json.loads(meta["params"], parse_constant=_reject)  # strict JSON, no Infinity
+        assert params["noise_preset"]["max_z_m"] == "inf"
+        assert params["sim"]["view_distance_m"] == 0.32
+        assert float(meta["stroke_width_m"]) == 0.03
+        assert rec.plan().usable == 2 and rec.camera.width == 48
+
+
+def test_config_file_sets_simulator_parameters(tmp_path: Path) -> None:
+    config = tmp_path / "sim.toml"
+    config.write_text("[sim]\nobject = 'slanted'\nviews = 1\nwidth = 32\nheight = 24\n")
+    out = tmp_path / "s.mcap"
+    result = CliRunner().invoke(cli, ["record", "--config", str(config), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    with open_recording(out) as rec:
+        assert rec.metadata["scrapcut"]["object"] == "slanted"
+
+
+def test_known_errors_are_one_line_with_exit_code_one(tmp_path: Path) -> None:
+    out = tmp_path / "x.mcap"
+    for args, message in (
+        (["--object", "anvil"], "unknown object 'anvil'"),
+        (["--paint", "mauve"], "unknown paint preset 'mauve'"),
+        (["--mode", "explore"], "explore mode needs the exploration planner"),
+    ):
+        result = CliRunner().invoke(cli, ["record", *args, "-o", str(out)])
+        assert result.exit_code == 1, result.output
+        lines = [line for line in result.output.splitlines() if line.startswith("scrapcut: error")]
+        assert len(lines) == 1 and message in lines[0]
+        assert "Traceback" not in result.output
+    assert not out.exists()
+
+
+def test_usage_errors_exit_with_two(tmp_path: Path) -> None:
+    assert CliRunner().invoke(cli, ["record"]).exit_code == 2  # no -o
+    bad = CliRunner().invoke(cli, ["record", "--noise", "foggy", "-o", str(tmp_path / "x.mcap")])
+    assert bad.exit_code == 2

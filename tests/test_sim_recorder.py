@@ -1,0 +1,381 @@
+"""Tests of scrapcut_cli.sim.recorder: what a simulated recording holds, read back by our reader.
+
+Recordings here are tiny (≤ 160×120 px, a few views) so the module runs in seconds.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from scrapcut_cli.config import SimConfig
+from scrapcut_cli.errors import SimError
+from scrapcut_cli.exploration.decision import Decision
+from scrapcut_cli.geometry import PolylineDistance, rotation_angle, transform_points
+from scrapcut_cli.perception.paint import PAINT_PRESETS, paint_mask
+from scrapcut_cli.recording.frame import Frame
+from scrapcut_cli.recording.reader import open_recording
+from scrapcut_cli.sim import list_objects, record
+from scrapcut_cli.sim.camera import T_HAND_CAMLINK
+from scrapcut_cli.sim.recorder import (
+    COLOR_TOPIC,
+    DEPTH_TOPIC,
+    INFO_TOPIC,
+    RecordResult,
+    SimContext,
+    place_object,
+    planned_views,
+    validate,
+)
+from scrapcut_cli.sim.robot import Q_READY, PandaSim
+from scrapcut_cli.sim.views import PrePlannedPlanner
+
+NAMES = [name for name, _ in list_objects()]
+
+
+class CapturingPlanner:
+    """Wraps a planner and keeps every frame the recorder hands it."""
+
+    def __init__(self, inner: PrePlannedPlanner) -> None:
+        self.inner = inner
+        self.frames: list[Frame] = []
+        self.total = inner.total
+
+    def start(self) -> Decision:
+        return self.inner.start()
+
+    def observe(self, frame: Frame) -> Decision:
+        self.frames.append(frame)
+        return self.inner.observe(frame)
+
+    def skip(self, reason: str) -> Decision:
+        return self.inner.skip(reason)
+
+
+def capture(config: SimConfig, path: Path) -> tuple[RecordResult, list[Frame]]:
+    planner = CapturingPlanner(PrePlannedPlanner(planned_views(config, place_object(config))))
+    return record(config, path, planner=planner), planner.frames
+
+
+def header_stamp(msg: Any) -> int:
+    """Header stamp in ns (a TFMessage has one per transform; they are equal here)."""
+    header = msg.transforms[0].header if hasattr(msg, "transforms") else msg.header
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+
+
+def log_and_header_stamps(path: Path, topic: str) -> tuple[np.ndarray, np.ndarray]:
+    with path.open("rb") as f:
+        log = [m.log_time for _, ch, m in make_reader(f).iter_messages() if ch.topic == topic]
+    with open_recording(path) as rec:
+        header = [header_stamp(msg) for _, _, msg in rec.messages([topic])]
+    return np.array(log), np.array(header)
+
+
+@pytest.fixture(scope="module")
+def sweep(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, RecordResult, list[Frame]]:
+    path = tmp_path_factory.mktemp("sim") / "cylinder.mcap"
+    config = SimConfig(width=160, height=120, views=4, frames_per_view=2, seed=3)
+    result, frames = capture(config, path)
+    return path, result, frames
+
+
+def test_recording_has_every_topic_at_its_rate(sweep: tuple[Path, RecordResult, Any]) -> None:
+    path, result, _ = sweep
+    assert (result.views, result.frames, result.infeasible_views, result.collisions) == (4, 8, 0, 0)
+    with open_recording(path) as rec:
+        counts = {t.name: t.count for t in rec.topics()}
+        assert counts[COLOR_TOPIC] == counts[DEPTH_TOPIC] == counts[INFO_TOPIC] == 8
+        assert counts["/tf_static"] == 2 and counts["/scrapcut/reference"] == 1
+        assert "/scrapcut/exploration" not in counts
+        tf = np.array([header_stamp(msg) for _, _, msg in rec.messages(["/tf"])])
+        joints = [msg for _, _, msg in rec.messages(["/joint_states"])]
+        images = np.array([stamp for _, stamp, _ in rec.messages([COLOR_TOPIC])])
+    assert np.all(np.diff(tf) == 10_000_000)  # 100 Hz throughout, motion included
+    assert tf[0] < images[0] - 100_000_000 and tf[-1] > images[-1] + 100_000_000
+    assert len(joints) == len(tf) and list(joints[0].name[:2]) == ["panda_joint1", "panda_joint2"]
+    positions = np.array([j.position[:7] for j in joints])
+    moving = np.linalg.norm(np.diff(positions, axis=0), axis=1) > 1e-9
+    assert moving.sum() > 10 * result.views  # /tf follows the motion, not only image stamps
+    assert np.diff(images).min() > 0
+    assert result.camera_travel_m > 0.1 and result.duration_s == pytest.approx(
+        (tf[-1] - tf[0]) / 1e9, abs=0.02
+    )
+
+
+def test_static_transforms_come_from_two_publishers_with_old_stamps(
+    sweep: tuple[Path, RecordResult, Any],
+) -> None:
+    path, _, _ = sweep
+    with open_recording(path) as rec:
+        static = [header_stamp(msg) for _, _, msg in rec.messages(["/tf_static"])]
+        edges = [
+            [(t.header.frame_id, t.child_frame_id) for t in msg.transforms]
+            for _, _, msg in rec.messages(["/tf_static"])
+        ]
+        first_tf = next(header_stamp(msg) for _, _, msg in rec.messages(["/tf"]))
+        assert rec.base_frame == "panda_link0"
+        assert rec.camera_frame == "camera_color_optical_frame"
+    assert sorted(edges) == sorted(
+        [
+            [("panda_link8", "panda_hand")],
+            [("panda_hand", "camera_link"), ("camera_link", "camera_color_optical_frame")],
+        ]
+    )
+    assert all(stamp < first_tf - 1_000_000_000 for stamp in static)
+
+
+def test_log_times_trail_header_stamps_and_the_file_is_in_log_order(
+    sweep: tuple[Path, RecordResult, Any],
+) -> None:
+    path, _, _ = sweep
+    for topic, low, high in ((COLOR_TOPIC, 20e6, 40e6), ("/tf", 0.3e6, 2e6)):
+        log, header = log_and_header_stamps(path, topic)
+        lag = log - header
+        assert lag.min() >= low and lag.max() <= high
+        assert len(np.unique(lag)) > len(lag) // 2  # seeded jitter, not a constant
+    with path.open("rb") as f:
+        file_order = [m.log_time for _, _, m in make_reader(f).iter_messages(log_time_order=False)]
+    assert np.all(np.diff(file_order) >= 0)
+
+
+def test_metadata_describes_the_run(sweep: tuple[Path, RecordResult, Any]) -> None:
+    path, result, _ = sweep
+    with open_recording(path) as rec:
+        meta = rec.metadata["scrapcut"]
+        summary = rec.metadata["scrapcut_result"]
+    assert {k: meta[k] for k in ("object", "mode", "noise", "paint", "seed")} == {
+        "object": "cylinder",
+        "mode": "sweep",
+        "noise": "d435i",
+        "paint": "orange",
+        "seed": "3",
+    }
+    assert float(meta["stroke_width_m"]) == 0.025 and meta["tool_version"]
+    params = json.loads(meta["params"])
+    assert params["sim"]["frames_per_view"] == 2 and params["noise_preset"]["subpixel"] == 0.08
+    assert np.allclose(params["hand_eye_nominal"], T_HAND_CAMLINK)
+    assert summary["views"] == str(result.views) and summary["stop_reason"] == "done"
+
+
+def test_reader_returns_exactly_what_the_planner_saw(
+    sweep: tuple[Path, RecordResult, list[Frame]],
+) -> None:
+    path, _, seen = sweep
+    with open_recording(path) as rec:
+        frames = list(rec.frames())
+        reference = rec.reference()
+    assert len(frames) == 8 and len(seen) == 4  # the planner sees the last image of a view
+    for mine, read in zip(seen, frames[1::2], strict=True):
+        assert read.stamp_ns == mine.stamp_ns
+        assert np.array_equal(read.color, mine.color)
+        assert np.array_equal(read.depth, mine.depth, equal_nan=True)
+        assert np.allclose(read.T_base_cam, mine.T_base_cam, atol=1e-9)
+        # d435i has no hand-eye error: the recorded pose is the true one.
+        assert np.allclose(mine.extras["T_base_cam_true"], mine.T_base_cam, atol=1e-12)
+    assert reference is not None
+    assert np.allclose(reference, place_object(SimConfig()).reference, atol=1e-12)
+
+
+def paint_distances(path: Path) -> tuple[np.ndarray, float]:
+    """Distances (m) of back-projected orange pixels to the reference; the stroke's max half."""
+    with open_recording(path) as rec:
+        reference = rec.reference()
+        assert reference is not None
+        params = json.loads(rec.metadata["scrapcut"]["params"])
+        distance = PolylineDistance(reference)
+        out = []
+        for frame in rec.frames():
+            mask = paint_mask(frame.color, PAINT_PRESETS["orange"].hsv) & np.isfinite(frame.depth)
+            v, u = np.nonzero(mask)
+            points = frame.camera.unproject(u, v, frame.depth[v, u])
+            out.append(distance.distance(transform_points(frame.T_base_cam, points)))
+    return np.concatenate(out), params["stroke"]["max_half_width_m"]
+
+
+def test_paint_back_projects_onto_the_reference(
+    sweep: tuple[Path, RecordResult, Any], tmp_path: Path
+) -> None:
+    """Orange pixels, back-projected with the recorded poses, lie on the stroke.
+
+    ideal: every one within the widest half width + 0.6 mm (the 1 mm depth step along a ray);
+    d435i: 95 % within it + 2 mm (σ_z, flying pixels), the rest are overspray specks (within
+    the 25 mm overspray band) and flying pixels.
+    """
+    ideal = tmp_path / "ideal.mcap"
+    record(SimConfig(width=160, height=120, views=3, noise="ideal", seed=3), ideal)
+    d_ideal, half = paint_distances(ideal)
+    assert len(d_ideal) > 500
+    assert d_ideal.max() <= half + 0.0006
+    d_noisy, half = paint_distances(sweep[0])
+    assert np.median(d_noisy) < 0.5 * 0.025
+    assert np.mean(d_noisy <= half + 0.002) >= 0.95
+
+
+def test_yard_records_the_nominal_hand_eye_but_renders_the_true_one(tmp_path: Path) -> None:
+    config = SimConfig(object="planar_box", noise="yard", width=48, height=36, views=2, seed=5)
+    _, frames = capture(config, tmp_path / "yard.mcap")
+    for frame in frames:
+        true = frame.extras["T_base_cam_true"]
+        recorded = frame.T_base_cam
+        # Hand-eye error of 2 mm and 0.3 deg, seen through the flange.
+        assert np.degrees(rotation_angle(true[:3, :3], recorded[:3, :3])) == pytest.approx(0.3)
+        assert 0.0005 < np.linalg.norm(true[:3, 3] - recorded[:3, 3]) < 0.002 + 0.001
+
+
+def test_same_seed_same_bytes(tmp_path: Path) -> None:
+    config = SimConfig(object="slanted", width=48, height=36, views=2, seed=7, noise="yard")
+    a, b, c = tmp_path / "a.mcap", tmp_path / "b.mcap", tmp_path / "c.mcap"
+    record(config, a)
+    record(config, b)
+    record(replace(config, seed=8), c)
+    assert a.read_bytes() == b.read_bytes()
+    assert a.read_bytes() != c.read_bytes()
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_every_object_records_in_every_mode_on_the_default_placement(
+    name: str, tmp_path: Path
+) -> None:
+    """All default sweep views are executable; sweep and survey recordings run clean."""
+    config = SimConfig(object=name, width=32, height=24)
+    obj = place_object(config)
+    with PandaSim(obj.mesh, T_hand_camlink_nominal=T_HAND_CAMLINK) as robot:
+        q = np.asarray(Q_READY)
+        for T in planned_views(config, obj):
+            solution = robot.plan_view(T, q)
+            assert solution.feasible, solution.reason
+            assert solution.q is not None
+            q = solution.q
+    for mode in ("sweep", "survey"):
+        result = record(replace(config, mode=mode, views=2), tmp_path / f"{mode}.mcap")
+        assert (result.views, result.infeasible_views, result.collisions) == (2, 0, 0)
+        assert result.stop_reason == "done"
+
+
+class ToyExplorer:
+    """A closed-loop planner: three views stepping along +y from the start view, then stop."""
+
+    def __init__(self, context: SimContext) -> None:
+        self.context = context
+        self.steps = 0
+        self.checked: list[bool] = []
+
+    def start(self) -> Decision:
+        return Decision(self.context.start_view, "extrapolate", info={"step": 0})
+
+    def observe(self, frame: Frame) -> Decision:
+        self.steps += 1
+        if self.steps == 3:
+            return Decision(None, "done", stop=True, info={"pose": frame.T_base_cam})
+        T = self.context.start_view.copy()
+        T[1, 3] += 0.03 * self.steps
+        self.checked.append(self.context.reachable(T))
+        return Decision(T, "extrapolate", info={"k": self.steps})
+
+
+def test_explore_mode_runs_a_closed_loop_planner_and_logs_it(tmp_path: Path) -> None:
+    made: list[ToyExplorer] = []
+
+    def factory(context: SimContext) -> ToyExplorer:
+        made.append(ToyExplorer(context))
+        return made[-1]
+
+    config = SimConfig(object="air_chamber", mode="explore", width=32, height=24)
+    result = record(config, tmp_path / "explore.mcap", planner_factory=factory)
+    assert result.views == 3 and result.stop_reason == "done"
+    assert made[0].checked == [True, True]
+    assert made[0].context.camera.width == 32
+    with open_recording(tmp_path / "explore.mcap") as rec:
+        log = rec.exploration_log()
+    assert [step["reason"] for step in log] == ["extrapolate", "extrapolate", "done"]
+    assert log[-1]["stop"] is True and np.asarray(log[-1]["pose"]).shape == (4, 4)
+
+
+def test_explore_mode_without_a_planner_says_what_is_missing(tmp_path: Path) -> None:
+    with pytest.raises(SimError, match="explore mode needs the exploration planner"):
+        record(SimConfig(mode="explore"), tmp_path / "x.mcap")
+    assert not (tmp_path / "x.mcap").exists()
+
+
+class FarPlanner:
+    def start(self) -> Decision:
+        T = np.eye(4)
+        T[:3, 3] = (2.0, 0.0, 0.5)
+        return Decision(T, "extrapolate")
+
+    def observe(self, frame: Frame) -> Decision:
+        raise AssertionError("never reached")
+
+
+def test_an_infeasible_view_stops_a_planner_that_cannot_skip(tmp_path: Path) -> None:
+    path = tmp_path / "far.mcap"
+    result = record(SimConfig(width=32, height=24), path, planner=FarPlanner())
+    assert result.views == 0 and result.infeasible_views == 1
+    assert result.stop_reason.startswith("infeasible view")
+    with open_recording(path) as rec:
+        assert rec.reference() is not None
+
+
+class BrokenPlanner(FarPlanner):
+    def start(self) -> Decision:
+        raise RuntimeError("planner crashed")
+
+
+def test_a_failing_run_leaves_no_file(tmp_path: Path) -> None:
+    path = tmp_path / "broken.mcap"
+    with pytest.raises(RuntimeError, match="planner crashed"):
+        record(SimConfig(width=32, height=24), path, planner=BrokenPlanner())
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"object": "anvil"}, "unknown object"),
+        ({"mode": "wander"}, "unknown mode"),
+        ({"noise": "foggy"}, "unknown noise preset"),
+        ({"paint": "mauve"}, "unknown paint preset"),
+        ({"depth_encoding": "8UC1"}, "unknown depth encoding"),
+        ({"width": 0}, "resolution"),
+        ({"frames_per_view": 0}, "frames per view"),
+        ({"speed_scale": 1.5}, "speed scale"),
+    ],
+)
+def test_bad_parameters_are_named(change: dict[str, Any], message: str) -> None:
+    with pytest.raises(SimError, match=message):
+        validate(replace(SimConfig(), **change))
+
+
+FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "sim_cylinder_small.mcap"
+
+
+def test_committed_fixture_is_a_small_simulated_scan() -> None:
+    assert FIXTURE.stat().st_size <= 5_000_000
+    with open_recording(FIXTURE) as rec:
+        meta = rec.metadata["scrapcut"]
+        assert (meta["object"], meta["mode"], meta["noise"], meta["seed"]) == (
+            "cylinder",
+            "sweep",
+            "d435i",
+            "0",
+        )
+        assert rec.plan().usable == 6 and rec.camera.width == 320
+        assert rec.reference() is not None
+
+
+@pytest.mark.slow
+def test_committed_fixture_regenerates_byte_for_byte(tmp_path: Path) -> None:
+    """The command in fixtures/README.md reproduces the committed file exactly."""
+    config = SimConfig(object="cylinder", noise="d435i", width=320, height=240, views=6, seed=0)
+    again = tmp_path / "again.mcap"
+    record(config, again)
+    assert again.read_bytes() == FIXTURE.read_bytes(), (
+        "fixtures/sim_cylinder_small.mcap is stale: regenerate it with the command in "
+        "fixtures/README.md"
+    )
