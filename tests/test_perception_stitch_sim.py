@@ -41,7 +41,11 @@ def stitched(path: Path) -> tuple[StitchResult, np.ndarray, float]:
 
 
 def painted_samples(name: str, samples: np.ndarray) -> np.ndarray:
-    """(N,) bool: the piece's surface lies within 3 mm of the reference sample (not a gap)."""
+    """(N,) bool: the reference passes over the piece's surface here (not a gap).
+
+    "Over the surface" means within one wire radius (2 mm) of it: with a 40 mm mesh, samples
+    2-3 mm from a wire's flank are half-way off it and see paint only on its far side.
+    """
     obj = make_object(name)
     o3 = o3d()
     scene = o3.t.geometry.RaycastingScene()
@@ -50,7 +54,7 @@ def painted_samples(name: str, samples: np.ndarray) -> np.ndarray:
         o3.core.Tensor(obj.mesh.faces.astype(np.uint32)),
     )
     distance = scene.compute_distance(o3.core.Tensor(samples.astype(np.float32))).numpy()
-    return np.asarray(distance <= 0.003)
+    return np.asarray(distance <= 0.002)
 
 
 @pytest.mark.parametrize(("name", "noise"), CASES, ids=[f"{n}-{z}" for n, z in CASES])

@@ -86,7 +86,8 @@ def test_wire_basket_paint_has_gaps_a_box_does_not() -> None:
         return float(view.stroke[v[inside], u[inside]].mean())
 
     assert painted_share("planar_box") > 0.99  # (a few samples at the edge fall off it)
-    assert 0.2 < painted_share("basket") < 0.7
+    # 4 mm wires at a 40 mm pitch in two crossed layers: paint on a tenth to a half of the line.
+    assert 0.1 < painted_share("basket") < 0.5
 
 
 def test_render_is_deterministic_and_lighting_scales_colour() -> None:

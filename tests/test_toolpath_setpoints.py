@@ -186,7 +186,7 @@ def test_errors_name_the_problem() -> None:
         make_cutting_path(curve, surface, viewpoints[:-1], config=CONFIG)
     with pytest.raises(ToolpathError, match="surface cloud is empty"):
         make_cutting_path(curve, np.zeros((0, 3)), np.zeros((0, 3)), config=CONFIG)
-    with pytest.raises(ToolpathError, match="no surface points within 15 mm"):
+    with pytest.raises(ToolpathError, match=r"too few surface points for normals: .* within 15 mm"):
         make_cutting_path(curve, surface + np.array([1.0, 0.0, 0.0]), viewpoints, config=CONFIG)
     with pytest.raises(ToolpathError, match="no length"):
         make_cutting_path(Curve(curve_points[:1], "t"), surface, viewpoints, config=CONFIG)
@@ -278,14 +278,22 @@ def test_normals_on_every_simulator_piece(name: str) -> None:
     # 20 mm groove, narrower than the torch, where the rough region takes the coarse normal
     # that bridges the groove) are left out.
     reachable = np.array(["collision" not in f for f in path.flags])
-    assert np.median(angle) < 1.5
-    assert np.percentile(angle[reachable], 90) < 5.0
+    # The basket's 40 mm wire mesh leaves one wire or none within the 15 mm radius over much of
+    # the line, so its normals come from the coarse radius and are a little less exact.
+    median_deg, p90_deg = (3.0, 7.0) if name == "basket" else (1.5, 5.0)
+    assert np.median(angle) < median_deg
+    assert np.percentile(angle[reachable], 90) < p90_deg
     np.testing.assert_allclose(
         np.linalg.norm(path.positions - path.surface_points, axis=1), CONFIG.standoff_m
     )
     collisions = path.info["collision"]
-    if name in ("cylinder", "slanted", "planar_box", "basket"):
+    if name in ("cylinder", "slanted", "planar_box"):
         assert path.flagged == 0  # convex pieces: the upright torch is free everywhere
+    if name == "basket":
+        # Free everywhere too, but where the line crosses a mesh opening there is no metal
+        # under the torch: those set-points say so, the cut simply passes over the gap.
+        assert collisions == 0 and path.info["tilted"] == 0
+        assert 0 < path.info["no_surface"] < 0.25 * len(path)
     if name in ("i_beam", "air_chamber"):
         # The web-flange inner corners and the groove: a 24 mm torch cannot reach the bottom.
         assert collisions > 0

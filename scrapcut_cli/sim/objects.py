@@ -245,7 +245,10 @@ def _t_piece() -> _Built:
 
 
 def _basket() -> _Built:
-    """An upturned wire-mesh basket (300 × 400 × 150 mm, 4 mm wires at 25 mm pitch).
+    """An upturned wire-mesh basket (300 × 400 × 150 mm, 4 mm wires at 40 mm pitch).
+
+    A 40 mm mesh (common for scrap and storage cages) leaves gaps of 15–36 mm along the line:
+    at the paper's 5 mm leaf the skeleton falls apart, at 20 mm it bridges them, as in the paper.
 
     The line is sprayed across the wire grid: up the -y side and over the top in an S. Paint
     lands only on wires, so the painted line has gaps (the paper's skeletonisation broke here
@@ -253,7 +256,7 @@ def _basket() -> _Built:
     """
     sx, sy, sz = 0.15, 0.20, 0.15  # half sizes in x, y; height
     r = 0.002
-    pitch = 0.025
+    pitch = 0.040
     wires: list[TriMesh] = []
     xs = np.arange(-sx, sx + 1e-9, pitch)
     ys = np.arange(-sy, sy + 1e-9, pitch)

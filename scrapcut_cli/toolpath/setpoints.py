@@ -100,9 +100,10 @@ def make_cutting_path(
     if not estimate.supported.any():
         nearest = float(np.min(np.linalg.norm(surface[:, None] - surface_points[None, :1], axis=2)))
         raise ToolpathError(
-            f"no surface points within {config.normal_radius_m * 1000:g} mm of the curve "
-            f"(nearest {nearest * 1000:.0f} mm from its start); are curve and surface in the "
-            f"same frame? try a larger normal radius"
+            f"too few surface points for normals: no set-point has {config.min_surface_points} "
+            f"within {config.normal_radius_m * 1000:g} mm (nearest point {nearest * 1000:.0f} mm "
+            "from the curve's start); are curve and surface in the same frame? try a larger "
+            "--normal-radius-mm"
         )
     normals = fill_unsupported(arc, estimate.normals, estimate.supported)
     normals = smooth_along_path(
