@@ -128,6 +128,11 @@ class NurbsConfig:
     sample_spacing_m: float = 0.001  # spacing of Curve.points
     corner_angle_deg: float = 30.0  # sharper turns become kinks (C0 knots); 0: smooth only
     max_corners: int = 8
+    # Ends: a spray stroke's round cap reaches about half a stroke width past the line's end.
+    # "auto": end at each cap's centre (a square end, paint running off an edge, is kept);
+    # "cap": always a round cap; "none": the paint's extent. See fitting/ends.py.
+    end_trim: str = "auto"
+    end_trim_m: float | None = None  # fixed trim at each end instead of the estimate
 
 
 @dataclass(frozen=True)
@@ -147,6 +152,8 @@ class SkeletonConfig:
     refine_iterations: int = 2
     end_quantile: float = 0.002  # the curve ends where this share of the points lies beyond
     sample_spacing_m: float = 0.001  # spacing of Curve.points
+    end_trim: str = "auto"  # "auto" | "cap" | "none": as NurbsConfig.end_trim
+    end_trim_m: float | None = None  # fixed trim at each end instead of the estimate
 
 
 @dataclass(frozen=True)
@@ -198,7 +205,7 @@ class ExplorationConfig:
     body_radius_m: float = 0.06
     look_past: bool = True  # re-observe past an edge or sharp turn before declaring an end
     look_past_angles_deg: tuple[float, ...] = (60.0, 90.0, 40.0)  # view tilts about the edge
-    edge_probe_m: float = 0.015  # surface must continue this far beyond a confirmed end
+    edge_probe_m: float = 0.025  # surface must continue this far beyond a confirmed end
     turn_angle_deg: float = 45.0  # the fitted curve turning more near its end: look past
 
 
@@ -228,6 +235,7 @@ class SimConfig:
     object_x_m: float = 0.5  # placement of the piece on the floor, base frame
     object_y_m: float = 0.0
     object_yaw_deg: float = 0.0
+    start_fraction: float | None = None  # explore start along the line, 0-1; None: the piece's
 
 
 @dataclass(frozen=True)

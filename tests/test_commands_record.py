@@ -83,7 +83,6 @@ def test_known_errors_are_one_line_with_exit_code_one(tmp_path: Path) -> None:
     for args, message in (
         (["--object", "anvil"], "unknown object 'anvil'"),
         (["--paint", "mauve"], "unknown paint preset 'mauve'"),
-        (["--mode", "explore"], "explore mode needs the exploration planner"),
     ):
         result = CliRunner().invoke(cli, ["record", *args, "-o", str(out)])
         assert result.exit_code == 1, result.output

@@ -76,6 +76,13 @@ def _mm(value: float | None) -> float | None:
     help="Camera distance to the line [mm] (default 300).",
 )
 @click.option(
+    "--start-fraction",
+    type=click.FloatRange(min=0.0, max=1.0),
+    default=None,
+    help="Explore mode: where along the line (0-1) the first view looks, as a worker would "
+    "point the robot (default: the middle; 0.2 on slanted, on one face).",
+)
+@click.option(
     "--depth-encoding",
     type=click.Choice(("16UC1", "32FC1")),
     default=None,
@@ -103,6 +110,7 @@ def record(
     frames_per_view: int | None,
     stroke_width_mm: float | None,
     distance_mm: float | None,
+    start_fraction: float | None,
     depth_encoding: str | None,
     config_path: Path | None,
     output: Path | None,
@@ -140,6 +148,7 @@ def record(
         frames_per_view=frames_per_view,
         stroke_width_m=_mm(stroke_width_mm),
         view_distance_m=_mm(distance_mm),
+        start_fraction=start_fraction,
         depth_encoding=depth_encoding,
     )
     sim = config.sim
@@ -149,13 +158,21 @@ def record(
         f"{sim.width}×{sim.height} px, seed {sim.seed}) → {output}",
         soft_wrap=True,
     )
+    factory = None
+    if sim.mode == "explore":
+        from scrapcut_cli.exploration.planner import planner_factory
+        from scrapcut_cli.perception.paint import resolve_paint
+
+        # The planner looks for the simulator's paint unless --hsv tunes its filter.
+        planner_hsv = resolve_paint(config.paint) if config.paint.hsv is not None else None
+        factory = planner_factory(config, hsv=planner_hsv)
     with progress("views") as bar:
         task = bar.add_task("recording", total=None, status="")
 
         def advance(done: int, total: int) -> None:
             bar.update(task, completed=done, total=total)
 
-        result = record_scan(sim, output, progress=advance)
+        result = record_scan(sim, output, progress=advance, planner_factory=factory)
     _print_result(out, result)
 
 

@@ -375,6 +375,17 @@ _CATALOGUE: dict[str, tuple[str, Callable[[], _Built]]] = {
 }
 
 
+#: Where along its line (0-1) explore mode starts, i.e. where the worker points the robot. The
+#: middle, except on the slanted piece: its middle is the ridge, where both faces are in view;
+#: starting on one face is the paper's real-robot case, where exploration stopped at the edge.
+EXPLORE_START_FRACTION: dict[str, float] = {"slanted": 0.2}
+
+
+def explore_start_fraction(name: str) -> float:
+    """Default start of explore mode on piece ``name``, as a fraction of its line's length."""
+    return EXPLORE_START_FRACTION.get(name, 0.5)
+
+
 def list_objects() -> list[tuple[str, str]]:
     """(name, one-line description) of every simulated scrap piece, in catalogue order."""
     return [(name, entry[0]) for name, entry in _CATALOGUE.items()]

@@ -146,7 +146,8 @@ class RecordResult:
 class SimContext:
     """What a closed-loop planner may use from the simulator (explore mode).
 
-    ``start_view`` is the worker's initial segment: a view of the middle of the painted line.
+    ``start_view`` is the worker's initial segment: a view of the painted line at
+    ``SimConfig.start_fraction`` of its length (default: the piece's own, usually the middle).
     ``reachable(T_base_cam)`` answers with IK, joint limits and collisions against the true
     piece and floor, from the robot's current joints.
     """
@@ -201,6 +202,10 @@ def validate(config: SimConfig) -> None:
         (0 < config.speed_scale <= 1, f"speed scale {config.speed_scale} (0-1]"),
         (config.tf_rate_hz > 0, f"tf rate {config.tf_rate_hz} Hz"),
         (0 <= config.min_elevation_deg < 90, f"min elevation {config.min_elevation_deg} deg"),
+        (
+            config.start_fraction is None or 0.0 <= config.start_fraction <= 1.0,
+            f"start fraction {config.start_fraction} (0-1)",
+        ),
     ]
     for ok, what in checks:
         if not ok:
@@ -261,8 +266,9 @@ def record(
     """
     from scrapcut_cli.perception.paint import PAINT_PRESETS
     from scrapcut_cli.recording.writer import McapWriter
+    from scrapcut_cli.sim.objects import explore_start_fraction
     from scrapcut_cli.sim.render import SceneRenderer
-    from scrapcut_cli.sim.views import PrePlannedPlanner, sweep_views
+    from scrapcut_cli.sim.views import PrePlannedPlanner, views_along
 
     wall_start = time.perf_counter()
     validate(config)
@@ -306,17 +312,20 @@ def record(
             )
             active = PrePlannedPlanner(views, reason=config.mode)
         else:
-            middle = sweep_views(
+            fraction = config.start_fraction
+            if fraction is None:
+                fraction = explore_start_fraction(obj.name)
+            start_view = views_along(
                 obj,
+                [fraction],
                 distance_m=config.view_distance_m,
-                count=1,
                 min_elevation_deg=config.min_elevation_deg,
             )[0]
             context = SimContext(
                 config=config,
                 camera=camera,
                 reachable=lambda T: robot.reachable(T, session.q),
-                start_view=middle,
+                start_view=start_view,
                 object_name=obj.name,
             )
             active = planner_factory(context)

@@ -84,11 +84,34 @@ def sweep_views(
             f"sweep needs a positive distance and step and count >= 0, got distance "
             f"{distance_m} m, step {step_m} m, count {count}"
         )
+    length = float(cumulative_length(obj.reference)[-1])
+    n = count if count > 0 else int(np.ceil(length / step_m - 1e-9)) + 1
+    fractions = np.linspace(0.0, 1.0, n) if n > 1 else np.array([0.5])
+    return views_along(
+        obj,
+        fractions,
+        distance_m=distance_m,
+        min_elevation_deg=min_elevation_deg,
+        normal_window_m=normal_window_m,
+    )
+
+
+def views_along(
+    obj: ScrapObject,
+    fractions: ArrayLike,
+    *,
+    distance_m: float = 0.3,
+    min_elevation_deg: float = 35.0,
+    normal_window_m: float = 0.03,
+) -> list[FloatArray]:
+    """Camera poses (4, 4) looking at the line at the given fractions (0-1) of its length.
+
+    Each camera looks along the painted surface's normal there (averaged over
+    ``normal_window_m`` of line, raised to ``min_elevation_deg``), image x along the line.
+    """
     ref = obj.reference
     arc = cumulative_length(ref)
-    length = float(arc[-1])
-    n = count if count > 0 else int(np.ceil(length / step_m - 1e-9)) + 1
-    s = np.linspace(0.0, length, max(n, 1)) if n > 1 else np.array([0.5 * length])
+    s = np.clip(np.asarray(fractions, dtype=np.float64).reshape(-1), 0.0, 1.0) * arc[-1]
     normals = obj.reference_normals
     tangents = polyline_tangents(ref)
     targets = interpolate_polyline(ref, s, cumulative=arc)

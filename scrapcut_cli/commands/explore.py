@@ -1,0 +1,307 @@
+"""``scrapcut explore REC``: replay Algorithm 1 over a recording, or tune it with ``--what-if``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import click
+
+from scrapcut_cli.commands._options import (
+    build_config,
+    config_option,
+    paint_options,
+    recording_options,
+)
+
+if TYPE_CHECKING:
+    from scrapcut_cli.exploration.replay import ExplorationRun
+
+METHODS = ("nurbs", "skeleton")
+
+
+def _mm(value: float | None) -> float | None:
+    return None if value is None else value / 1000.0
+
+
+@click.command("explore")
+@click.argument("recording", type=click.Path(path_type=Path))
+@click.option(
+    "--method",
+    type=click.Choice(METHODS),
+    default=None,
+    help="Curve fit the planner extrapolates (replay: must be the logged one; what-if: "
+    "default nurbs).",
+)
+@click.option(
+    "--what-if",
+    "what_if_mode",
+    is_flag=True,
+    help="Run the planner with these parameters over the recording's frames (a survey or any "
+    "dense scan), answering each planned view with the nearest recorded frame.",
+)
+@click.option(
+    "--delta-size",
+    type=click.IntRange(min=0),
+    default=None,
+    help="What-if: new paint voxels at or below which an end is declared (default 20).",
+)
+@click.option(
+    "--step-mm",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=None,
+    help="What-if: next target this far beyond the fitted curve's end [mm] (default 60).",
+)
+@click.option(
+    "--min-distance-mm",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=None,
+    help="What-if: nearest camera distance tried [mm] (default 200).",
+)
+@click.option(
+    "--max-distance-mm",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=None,
+    help="What-if: farthest camera distance tried [mm] (default 450).",
+)
+@click.option(
+    "--max-steps",
+    type=click.IntRange(min=1),
+    default=None,
+    help="What-if: frames observed before stopping with 'budget' (default 60).",
+)
+@click.option(
+    "--look-past/--no-look-past",
+    default=None,
+    help="What-if: re-observe past an edge before declaring an end (default on).",
+)
+@click.option(
+    "--match-distance-mm",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=100.0,
+    show_default=True,
+    help="What-if: a recorded frame answers a planned view within this camera distance [mm].",
+)
+@click.option(
+    "--match-angle-deg",
+    type=click.FloatRange(min=0.0, max=180.0, min_open=True),
+    default=30.0,
+    show_default=True,
+    help="What-if: ...and within this angle between the optical axes [deg].",
+)
+@click.option(
+    "--start-frame",
+    type=click.IntRange(min=0),
+    default=None,
+    help="What-if: frame index of the initial view (default: the frame showing most paint).",
+)
+@click.option(
+    "--reference",
+    type=click.Path(path_type=Path),
+    default=None,
+    metavar="REC|CSV",
+    help="Reference curve for the coverage (default: the recording's /scrapcut/reference).",
+)
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Also write the path file (scrapcut.path/v1 JSON) of the global fit over the frames "
+    "the planner used: scrapcut fit's recipe.",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the run (summary and steps) as JSON.")
+@config_option
+@recording_options
+@paint_options
+def explore(
+    recording: Path,
+    method: str | None,
+    what_if_mode: bool,
+    delta_size: int | None,
+    step_mm: float | None,
+    min_distance_mm: float | None,
+    max_distance_mm: float | None,
+    max_steps: int | None,
+    look_past: bool | None,
+    match_distance_mm: float,
+    match_angle_deg: float,
+    start_frame: int | None,
+    reference: Path | None,
+    output: Path | None,
+    as_json: bool,
+    config_path: Path | None,
+    **shared: Any,
+) -> None:
+    """Replay Algorithm 1 over RECORDING, or tune it with --what-if.
+
+    On an exploration recording (scrapcut record --mode explore) every decision is recomputed
+    from the recorded frames, the reachability answers come from the log, and each decision is
+    compared with the logged one; a divergence exits with status 1. With --what-if the planner
+    runs with the given parameters over any recording's frames (a survey is dense enough) and
+    reports the views it would take, the endpoints it finds and the coverage of the final fit.
+    With -o, the global fit over the frames the planner used is written as a path file.
+    """
+    from scrapcut_cli.commands._console import err, progress
+
+    planner_options = {
+        "--delta-size": delta_size,
+        "--step-mm": step_mm,
+        "--min-distance-mm": min_distance_mm,
+        "--max-distance-mm": max_distance_mm,
+        "--max-steps": max_steps,
+        "--look-past/--no-look-past": look_past,
+        "--start-frame": start_frame,
+    }
+    given = [name for name, value in planner_options.items() if value is not None]
+    if given and not what_if_mode:
+        raise click.UsageError(
+            f"{', '.join(given)} change the planner: add --what-if (a replay repeats the logged "
+            "parameters)"
+        )
+    config = build_config(config_path, **shared)
+    reference_points = None
+    if reference is not None:
+        from scrapcut_cli.evaluation.sources import load_reference
+
+        reference_points = load_reference(reference, config=config.recording).points
+
+    with progress("steps" if not what_if_mode else "frames") as bar:
+        task = bar.add_task("what-if" if what_if_mode else "replaying", total=None, status="")
+
+        def advance(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        if what_if_mode:
+            from scrapcut_cli.exploration.replay import what_if
+
+            config = config.override(
+                "exploration",
+                method=method,
+                delta_size=delta_size,
+                step_m=_mm(step_mm),
+                min_distance_m=_mm(min_distance_mm),
+                max_distance_m=_mm(max_distance_mm),
+                max_steps=max_steps,
+                look_past=look_past,
+            )
+            run = what_if(
+                recording,
+                config=config,
+                reference=reference_points,
+                start_frame=start_frame,
+                match_distance_m=match_distance_mm / 1000.0,
+                match_angle_deg=match_angle_deg,
+                progress=advance,
+            )
+        else:
+            from scrapcut_cli.exploration.replay import replay_exploration
+
+            run = replay_exploration(
+                recording,
+                config=config,
+                method=method,
+                reference=reference_points,
+                progress=advance,
+            )
+
+    written = None
+    if output is not None:
+        from scrapcut_cli.exploration.replay import fit_path
+        from scrapcut_cli.toolpath.pathfile import write_path_file
+
+        write_path_file(output, fit_path(run, config=config).to_path_dict())
+        written = output
+    if as_json:
+        data = run.to_dict()
+        data["output"] = None if written is None else str(written)
+        click.echo(json.dumps(data, indent=2))
+    else:
+        _render(run)
+        if written is not None:
+            err.print(f"wrote {written}")
+    if run.fit_failure:
+        err.print(f"[yellow]note:[/] the global fit failed: {run.fit_failure}")
+    if run.divergences:
+        from scrapcut_cli.errors import ExplorationError
+
+        raise ExplorationError(
+            f"the replay diverged from the log in {len(run.divergences)} place(s); first: "
+            f"{run.divergences[0]}"
+        )
+
+
+def _render(run: ExplorationRun) -> None:
+    import numpy as np
+    from rich.table import Table
+
+    from scrapcut_cli.commands._console import out, print_table
+
+    title = "Algorithm 1 " + ("replayed" if run.mode == "replay" else "what-if")
+    steps = Table(title=f"{title}: {run.source} ({run.method})")
+    for name in ("k", "frame", "action", "reason", "new", "size", "ends", "exec. err", "queries"):
+        steps.add_column(name, justify="right" if name not in ("action", "reason") else "left")
+    if run.mode == "replay":
+        steps.add_column("log")
+    for step in run.steps:
+        error = step.execution_error()
+        err_text = "-" if error is None else f"{1000 * error[0]:.1f} mm {np.degrees(error[1]):.1f}°"
+        row = [
+            str(step.k),
+            str(step.frame_index),
+            step.action,
+            step.reason,
+            str(step.growth),
+            str(step.size),
+            str(step.endpoints_found),
+            err_text,
+            str(step.queries),
+        ]
+        if run.mode == "replay":
+            row.append("[green]ok[/]" if not step.divergences else "[red]differs[/]")
+        steps.add_row(*row)
+    print_table(steps)
+
+    summary = Table(show_header=False, title="summary")
+    summary.add_column("", style="bold")
+    summary.add_column("")
+    ends = ", ".join(f"{e['reason']}" for e in run.ends) or "-"
+    rows = [
+        (
+            "views",
+            f"{run.views}" + (f" of {run.frames_available} frames" if run.mode != "replay" else ""),
+        ),
+        ("endpoints found", f"{run.endpoints_found} ({ends})"),
+        ("stopped", str(run.stop_reason)),
+        ("camera travel", f"{1000 * run.camera_travel_m:.0f} mm (straight lines between views)"),
+        ("stitched paint", f"{len(run.paint_points)} points"),
+    ]
+    if run.curve is not None:
+        rows.append(("global fit", f"{1000 * run.curve.length:.1f} mm of curve"))
+    if run.error is not None:
+        e = run.error
+        rows.append(
+            (
+                "against the reference",
+                f"mean {1000 * e.mean_m:.2f} mm, max {1000 * e.max_m:.2f} mm, coverage "
+                f"{100 * e.coverage:.1f} %",
+            )
+        )
+    if run.timings:
+        planner = np.median([t.planner for t in run.timings])
+        total = np.median([t.total for t in run.timings])
+        timing = f"median {planner:.0f} ms planner, {total:.0f} ms with perception"
+        if run.mode != "replay":
+            timing = f"median {planner:.0f} ms planner (frames perceived beforehand)"
+        rows.append(("decision time", timing))
+    if run.mode == "replay":
+        verdict = (
+            "[green]matches the log[/]"
+            if run.matches
+            else f"[red]{len(run.divergences)} divergence(s)[/]"
+        )
+        rows.append(("verification", verdict))
+    for key, value in rows:
+        summary.add_row(key, value)
+    out.print(summary)

@@ -1,0 +1,190 @@
+"""Replay of exploration recordings (verification against the log) and what-if runs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from exploration_scenes import CylinderScan, LoopResult, explore, write_exploration_recording
+from perception_scenes import top_view
+
+from scrapcut_cli.config import ScrapcutConfig
+from scrapcut_cli.errors import ExplorationError
+from scrapcut_cli.exploration.planner import ExplorationPlanner, pose_to_dict
+from scrapcut_cli.exploration.replay import (
+    NearestView,
+    RecordedAnswers,
+    replay_exploration,
+    what_if,
+)
+from scrapcut_cli.geometry import look_at
+from scrapcut_cli.perception.paint import PAINT_PRESETS
+
+ORANGE = PAINT_PRESETS["orange"].hsv
+
+
+def _reachable(T: np.ndarray) -> bool:
+    # A robot that cannot lower the camera below 0.46 m: some queries are refused.
+    return bool(T[2, 3] >= 0.46)
+
+
+@pytest.fixture(scope="module")
+def explored(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, LoopResult]:
+    scan = CylinderScan()
+    planner = ExplorationPlanner(scan.initial_view, reachable=_reachable, hsv=ORANGE)
+    loop = explore(planner, scan)
+    assert planner.stop_reason == "done"
+    path = tmp_path_factory.mktemp("explore") / "explored.mcap"
+    write_exploration_recording(path, loop.frames, loop.log, reference=scan.reference)
+    return path, loop
+
+
+def _tampered(path: Path, loop: LoopResult, out: Path, k: int, **changes: Any) -> Path:
+    log = json.loads(json.dumps(loop.log))
+    log[k].update(changes)
+    write_exploration_recording(out, loop.frames, log, reference=CylinderScan().reference)
+    return out
+
+
+def test_replay_repeats_every_decision(explored: tuple[Path, LoopResult]) -> None:
+    path, loop = explored
+    run = replay_exploration(path)
+    assert run.matches, run.divergences
+    assert run.mode == "replay" and run.method == "nurbs"
+    assert run.views == len(loop.frames)
+    assert run.stop_reason == "done" and run.endpoints_found == 2
+    assert [s.growth for s in run.steps] == [e["growth"] for e in loop.log]
+    assert any(s.queries > 1 for s in run.steps)  # refused queries were answered from the log
+    # Executed poses are where the frames were taken; the first answers the initial view.
+    assert np.allclose(run.steps[0].requested, CylinderScan().initial_view)
+    assert run.steps[1].execution_error() == pytest.approx((0.0, 0.0), abs=1e-9)
+    assert run.camera_travel_m > 0.5
+    assert run.error is not None and run.error.coverage >= 0.95
+    data = json.loads(json.dumps(run.to_dict()))
+    assert data["matches_log"] is True and data["views"] == len(loop.frames)
+    assert len(data["steps"]) == len(loop.frames)
+
+
+def test_a_changed_decision_is_a_divergence(
+    explored: tuple[Path, LoopResult], tmp_path: Path
+) -> None:
+    path, loop = explored
+    bad = _tampered(path, loop, tmp_path / "bad.mcap", 2, growth=loop.log[2]["growth"] + 1)
+    run = replay_exploration(bad)
+    assert not run.matches
+    assert run.divergences[0].startswith("step 2: growth")
+    assert run.steps[2].divergences and not run.steps[1].divergences
+
+
+def test_a_changed_reachability_answer_changes_the_plan(
+    explored: tuple[Path, LoopResult], tmp_path: Path
+) -> None:
+    path, loop = explored
+    k = next(i for i, e in enumerate(loop.log) if e["reachability"])
+    queries = [dict(q) for q in loop.log[k]["reachability"]]
+    assert queries[-1]["ok"]
+    queries[-1]["ok"] = False  # the robot now refuses the view the planner took
+    bad = _tampered(path, loop, tmp_path / "refused.mcap", k, reachability=queries)
+    run = replay_exploration(bad)
+    assert any(d.startswith(f"step {k}: ") for d in run.divergences)
+    assert any("reachability query the log does not have" in d for d in run.divergences)
+
+
+def test_replay_needs_the_log_and_the_logged_method(
+    explored: tuple[Path, LoopResult], tmp_path: Path
+) -> None:
+    path, loop = explored
+    with pytest.raises(ExplorationError, match=r"explored with nurbs.*--what-if"):
+        replay_exploration(path, method="skeleton")
+    bare = tmp_path / "bare.mcap"
+    write_exploration_recording(bare, loop.frames[:2], [{}, {}])
+    with pytest.raises(ExplorationError, match=r"no exploration log.*--what-if"):
+        replay_exploration(bare)
+
+
+def test_recorded_answers_check_the_asked_pose() -> None:
+    T = look_at([0.5, 0.0, 0.5], [0.5, 0.0, 0.0])
+    answers = RecordedAnswers()
+    answers.begin(3, [{**pose_to_dict(T), "ok": True}, {**pose_to_dict(T), "ok": False}])
+    assert answers(T) is True
+    moved = T.copy()
+    moved[0, 3] += 0.001
+    assert answers(moved) is False  # answered from the log, but noted
+    assert answers.divergences == [answers.divergences[0]]
+    assert answers.divergences[0].startswith("step 3: reachability asked at (501.0")
+    assert answers(T) is False
+    assert "does not have" in answers.divergences[-1]
+    answers.begin(4, [{**pose_to_dict(T), "ok": True}])
+    answers.finish()
+    assert answers.divergences[-1] == "step 4: 1 logged reachability queries were not asked"
+
+
+def test_nearest_view_weighs_position_and_viewing_angle() -> None:
+    down = look_at([0.5, 0.0, 0.3], [0.5, 0.0, 0.0])
+    near_tilted = look_at([0.52, 0.0, 0.3], [0.7, 0.0, 0.0])  # 2 cm off, looking 34 deg away
+    farther_same = look_at([0.56, 0.0, 0.3], [0.56, 0.0, 0.0])  # 6 cm off, same direction
+    views = NearestView(
+        np.array([near_tilted, farther_same]), match_distance_m=0.1, match_angle_deg=40.0
+    )
+    assert views.nearest(down) == 1  # 0.06 m < 0.02 m + 0.2 m/rad * 0.59 rad
+    strict = NearestView(np.array([near_tilted]), match_distance_m=0.1, match_angle_deg=30.0)
+    assert strict.nearest(down) is None and not strict(down)
+    with pytest.raises(ExplorationError, match="what-if matching"):
+        NearestView(np.array([down]), match_distance_m=0.0, match_angle_deg=30.0)
+
+
+@pytest.fixture(scope="module")
+def survey(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A dense scan of the pipe without any plan: top views every 4 cm at two heights."""
+    scan = CylinderScan()
+    frames = [
+        scan.capture(top_view(x, height_m=h))
+        for h in (0.25, 0.35)
+        for x in np.arange(-0.40, 0.401, 0.04)
+    ]
+    path = tmp_path_factory.mktemp("survey") / "survey.mcap"
+    write_exploration_recording(path, frames, [{}] * len(frames), reference=scan.reference)
+    return path
+
+
+def test_what_if_explores_a_dense_recording(survey: Path) -> None:
+    run = what_if(survey, config=ScrapcutConfig())
+    assert run.mode == "what_if" and run.divergences == []
+    assert run.stop_reason == "done" and run.endpoints_found == 2
+    assert run.views < run.frames_available == 42
+    assert run.error is not None and run.error.coverage >= 0.9
+    assert run.config["what_if"]["start_frame"] in range(42)
+    # Every executed view is a recorded one near what was planned.
+    for step in run.steps[1:]:
+        assert step.requested is not None
+        assert np.linalg.norm(step.executed[:3, 3] - step.requested[:3, 3]) <= 0.1
+
+
+def test_what_if_parameters_change_the_outcome(survey: Path) -> None:
+    default = what_if(survey, config=ScrapcutConfig())
+    blind = what_if(survey, config=ScrapcutConfig().override("exploration", delta_size=10**6))
+    # Nothing ever counts as growth: each direction ends at its first view.
+    assert blind.views < default.views
+    assert blind.error is not None and default.error is not None
+    assert blind.error.coverage < default.error.coverage
+    with pytest.raises(ExplorationError, match="start frame 999"):
+        what_if(survey, config=ScrapcutConfig(), start_frame=999)
+
+
+@pytest.mark.slow
+def test_a_run_the_recorder_cut_short_replays_without_divergence(tmp_path: Path) -> None:
+    """The simulator's own view budget ends the run before the planner does: not a divergence."""
+    from scrapcut_cli.config import SimConfig
+    from scrapcut_cli.exploration.planner import planner_factory
+    from scrapcut_cli.sim import record
+
+    sim = SimConfig(object="cylinder", mode="explore", width=160, height=120, max_views=2)
+    result = record(sim, tmp_path / "short.mcap", planner_factory=planner_factory(ScrapcutConfig()))
+    assert result.stop_reason == "budget" and result.views == 2
+    run = replay_exploration(tmp_path / "short.mcap")
+    assert run.matches, run.divergences
+    assert run.stop_reason == "recorder: budget"
+    assert run.views == 2 and run.endpoints_found < 2
