@@ -1,9 +1,10 @@
 """Curve fitting speed on a stitched-like paint cloud of a 0.5 m line, against geomdl.
 
 The cloud: a 0.5 m painted line that curves gently across a bent plate (radius 0.3 m in the
-plane, then over a 90-degree fold), a ragged 25 mm band, 1 mm noise, 1 % stray points, thinned
-as the stitcher does (one point per 2 mm voxel), in stitching order (along the line). About
-3,000 points.
+plane, then over a 90-degree fold), a ragged 25 mm band with round caps (the paint reaches
+about 12 mm past each end, as a spray stroke does), 1 mm noise, 1 % stray points, thinned as
+the stitcher does (one point per 2 mm voxel), in stitching order (along the line). About 8,000
+points.
 
 Timed, median of several runs, wall and CPU time (one core):
 
@@ -16,7 +17,9 @@ Timed, median of several runs, wall and CPU time (one core):
   control points as ours. It needs the order handed to it and fits the band's points as given.
 
 Each line also reports the fitted curve's error against the painted centre line (mean / max,
-reference to curve, mm).
+reference to curve, mm) and how far its ends lie from the line's (start / end, mm). The NURBS
+is also timed without the end estimate (``end_trim="none"``, the curve then runs to the caps'
+tips), which gives the estimate's cost.
 
     .venv/bin/python benchmarks/bench_fit.py [--runs 7] [--geomdl-runs 3]
 """
@@ -62,6 +65,22 @@ def painted_line(seed: int = 0) -> tuple[FloatArray, FloatArray]:
     k = np.minimum((t / 0.5 * (len(s) - 1)).astype(int), len(s) - 1)
     half = 0.0125 * (1.0 + 0.15 * np.sin(t / 0.02 + 1.0))
     pts = centre[k] + rng.uniform(-1.0, 1.0, n)[:, None] * half[:, None] * across[k]
+    # Round caps: half discs of the band's half width centred on the line's ends, as dense.
+    caps, cap_t = [], []
+    for at, inner, sign in ((0, 1, -1.0), (-1, -2, 1.0)):
+        h = 0.0125 * (1.0 + 0.15 * np.sin(s[at] / 0.02 + 1.0))
+        out = centre[at] - centre[inner]
+        out /= np.linalg.norm(out)
+        m = round(n * 0.5 * np.pi * h**2 / (0.5 * 2.0 * 0.0125))
+        r = h * np.sqrt(rng.uniform(0.0, 1.0, m))
+        a = rng.uniform(-0.5 * np.pi, 0.5 * np.pi, m)
+        caps.append(
+            centre[at] + (r * np.cos(a))[:, None] * out + (r * np.sin(a))[:, None] * across[at]
+        )
+        cap_t.append(s[at] + sign * r * np.cos(a))
+    pts = np.vstack([pts, *caps])
+    t = np.concatenate([t, *cap_t])
+    n = len(pts)
     pts += rng.normal(scale=0.001, size=pts.shape)
     stray = rng.random(n) < 0.01
     pts[stray] += rng.uniform(-0.04, 0.04, (int(stray.sum()), 3))
@@ -87,9 +106,15 @@ def time_it(fn: Callable[[], object], runs: int) -> tuple[float, float, object]:
     return statistics.median(wall), statistics.median(cpu), result
 
 
-def error_mm(curve_points: FloatArray, centre: FloatArray) -> tuple[float, float]:
+def error_mm(curve_points: FloatArray, centre: FloatArray) -> tuple[float, float, float, float]:
+    """(mean, max) distance line -> curve, and the distances of the curve's start and end from
+    the line's, mm."""
     d = PolylineDistance(curve_points).distance(centre)
-    return 1e3 * float(d.mean()), 1e3 * float(d.max())
+    if np.linalg.norm(curve_points[0] - centre[0]) > np.linalg.norm(curve_points[-1] - centre[0]):
+        curve_points = curve_points[::-1]
+    start = float(np.linalg.norm(curve_points[0] - centre[0]))
+    end = float(np.linalg.norm(curve_points[-1] - centre[-1]))
+    return 1e3 * float(d.mean()), 1e3 * float(d.max()), 1e3 * start, 1e3 * end
 
 
 def main() -> None:
@@ -104,6 +129,10 @@ def main() -> None:
     wall, cpu, curve = time_it(lambda: fit_nurbs(pts, config=NurbsConfig()), args.runs)
     nurbs = curve
     rows.append(("NURBS (ours)", wall, cpu, 0.100, error_mm(curve.points, centre)))
+    wall, cpu, curve = time_it(
+        lambda: fit_nurbs(pts, config=NurbsConfig(end_trim="none")), args.runs
+    )
+    rows.append(("NURBS, ends at the tips (ours)", wall, cpu, None, error_mm(curve.points, centre)))
     for leaf, target in ((0.005, 0.300), (0.002, 1.000)):
         config = SkeletonConfig(leaf_size_m=leaf)
         wall, cpu, curve = time_it(lambda c=config: fit_skeleton(pts, config=c), args.runs)
@@ -126,15 +155,20 @@ def main() -> None:
 
     print(
         f"{'method':34s} {'wall ms':>8s} {'cpu ms':>8s} {'target':>8s} "
-        f"{'mean mm':>8s} {'max mm':>7s}"
+        f"{'mean mm':>8s} {'max mm':>7s} {'ends mm':>11s}"
     )
-    for label, wall, cpu, target, (mean, worst) in rows:
+    for label, wall, cpu, target, (mean, worst, start, end) in rows:
         tgt = f"<{target * 1e3:.0f}" if target is not None else "-"
-        print(f"{label:34s} {wall * 1e3:8.1f} {cpu * 1e3:8.1f} {tgt:>8s} {mean:8.2f} {worst:7.2f}")
+        print(
+            f"{label:34s} {wall * 1e3:8.1f} {cpu * 1e3:8.1f} {tgt:>8s} {mean:8.2f} {worst:7.2f} "
+            f"{start:5.1f} {end:5.1f}"
+        )
     length = float(cumulative_length(nurbs.points)[-1])
     print(
         f"NURBS: {n_ctrl} control points, {nurbs.info['corners']} corner(s), "
-        f"length {length:.3f} m (true 0.500 m)"
+        f"length {length:.3f} m (true 0.500 m), stroke half width "
+        f"{1e3 * nurbs.info['stroke_half_width_m']:.1f} mm, ends trimmed "
+        f"{1e3 * nurbs.info['end_trim_m'][0]:.1f} / {1e3 * nurbs.info['end_trim_m'][1]:.1f} mm"
     )
 
 

@@ -20,8 +20,9 @@ def run(*args: object) -> Result:
 def small_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Result]:
     """Cylinder and air chamber, both methods, at 320×240, a two-leaf sweep (about 10 s)."""
     out = tmp_path_factory.mktemp("reproduce") / "results"
-    result = run("reproduce", "--objects", "cylinder,air_chamber", "--width", 320,
-                 "--height", 240, "--jobs", 1, "--leaf-sweep-mm", "5,20", "-o", out)  # fmt: skip
+    result = run("reproduce", "--objects", "cylinder,air_chamber", "--mode", "sweep",
+                 "--width", 320, "--height", 240, "--jobs", 1, "--leaf-sweep-mm", "5,20",
+                 "-o", out)  # fmt: skip
     return out, result
 
 
@@ -121,9 +122,9 @@ def test_unknown_method_is_one_line(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-def test_explore_mode_scans_once_per_method(tmp_path: Path) -> None:
+def test_explore_mode_is_the_default_and_scans_once_per_method(tmp_path: Path) -> None:
     out = tmp_path / "explored"
-    result = run("reproduce", "--objects", "cylinder", "--methods", "nurbs", "--mode", "explore",
+    result = run("reproduce", "--objects", "cylinder", "--methods", "nurbs",
                  "--width", 320, "--height", 240, "--jobs", 1, "--no-plots", "-o", out)  # fmt: skip
     assert result.exit_code == 0, result.output
     report = json.loads((out / "report.json").read_text())

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
-from helpers import arc_on_cylinder, line_on_plane, painted_stroke
+from helpers import arc_on_cylinder, corner_on_beam, line_on_plane, painted_stroke
 
-from scrapcut_cli.config import ScrapcutConfig, config_from_dict
+from scrapcut_cli.config import ScrapcutConfig, SkeletonConfig, config_from_dict
 from scrapcut_cli.errors import FittingError
 from scrapcut_cli.fitting import METHODS, extrapolate_end, fit_curve
 from scrapcut_cli.fitting.curve import Curve
@@ -15,7 +17,7 @@ from scrapcut_cli.fitting.curve import Curve
 @pytest.fixture(scope="module")
 def ordered_line() -> np.ndarray:
     line, normals = line_on_plane(0.4)
-    pts = painted_stroke(line, normals, seed=31)
+    pts = painted_stroke(line, normals, seed=31, caps=True)
     return pts[np.argsort(pts[:, 0])]
 
 
@@ -57,7 +59,7 @@ def test_extrapolate_follows_the_turn_of_an_arc():
     # On a pipe the end direction is close to the tangent at the end (the chord of the whole
     # arc would be 45 degrees off); a fitted end straightens a little over the last centimetres.
     line, normals = arc_on_cylinder(angle=np.pi / 2)
-    pts = painted_stroke(line, normals, seed=33)
+    pts = painted_stroke(line, normals, seed=33, caps=True)
     pts = pts[np.argsort(np.arctan2(pts[:, 1], pts[:, 0]))]
     tangent_at_end = np.array([-1.0, 0.0, 0.0])  # at angle 90 degrees, going anticlockwise
     for method in METHODS:
@@ -78,3 +80,46 @@ def test_extrapolate_rejects_bad_arguments(end, step):
     curve = Curve(points=np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0]]), method="other")
     with pytest.raises(ValueError):
         extrapolate_end(curve, end, step_m=step)  # type: ignore[arg-type]
+
+
+# --------------------------------------------------------------------------- ends
+
+#: Painted strokes with round caps (the paint reaches ~12 mm past each end) and the tolerance
+#: on each end of the fitted curve, mm. Over 8 strokes per case the ends lie 1.0-1.5 mm from
+#: the line's ends on average and at most 3.1 mm (continuous paint) or 8 mm (basket wires).
+CAPPED_STROKES = {
+    "straight": (line_on_plane(0.5), {}, 3.5),
+    "pipe": (arc_on_cylinder(), {}, 3.5),
+    "joint": (corner_on_beam(), {"outlier_share": 0.01}, 3.5),
+    "gaps": (line_on_plane(0.5), {"gaps": [(0.10, 0.14), (0.20, 0.25), (0.30, 0.34)]}, 3.5),
+    "short": (line_on_plane(0.03, 31), {}, 3.5),
+    # Wires 5 mm wide every 35 mm; one crosses each cap 6-11 mm beyond the line's end.
+    "basket": (
+        line_on_plane(0.473),
+        {"gaps": [(s + 0.005, s + 0.035) for s in np.arange(-0.046, 0.55, 0.035)]},
+        6.0,
+    ),
+}
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("case", sorted(CAPPED_STROKES))
+def test_capped_strokes_end_at_the_line_ends(case, method):
+    (line, normals), options, tolerance_mm = CAPPED_STROKES[case]
+    pts = painted_stroke(line, normals, caps=True, seed=7, **options)
+    pts = pts[np.argsort(pts @ (line[-1] - line[0]))]  # scanned from start to end
+    config = ScrapcutConfig()
+    if method == "skeleton" and case in ("gaps", "basket"):  # 5 mm leaves break over gaps
+        config = replace(config, skeleton=SkeletonConfig(leaf_size_m=0.02))
+    curve = fit_curve(pts, method, config)
+    start_mm = 1e3 * np.linalg.norm(curve.points[0] - line[0])
+    end_mm = 1e3 * np.linalg.norm(curve.points[-1] - line[-1])
+    assert start_mm < tolerance_mm and end_mm < tolerance_mm, (start_mm, end_mm)
+    trims = curve.info["end_trim_m"]
+    assert all(0.004 < t < 0.02 for t in trims), trims
+    if case != "short":  # a short stroke's width comes partly from its caps
+        assert abs(curve.info["stroke_half_width_m"] - 0.0125) < 0.0015
+    if curve.nurbs is not None:
+        # The exported model ends where the polyline does.
+        ends = curve.nurbs.evaluate(np.array(curve.nurbs.domain))
+        np.testing.assert_allclose(ends, curve.points[[0, -1]], atol=1e-9)

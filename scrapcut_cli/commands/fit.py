@@ -9,10 +9,14 @@ from typing import Any
 import click
 
 from scrapcut_cli.commands._options import (
+    apply_stage_options,
     build_config,
     config_option,
     paint_options,
+    perception_options,
     recording_options,
+    split_stage_options,
+    stitch_options,
 )
 
 METHODS = ("nurbs", "skeleton")
@@ -128,6 +132,8 @@ def _mm(value: float | None) -> float | None:
 @config_option
 @recording_options
 @paint_options
+@perception_options
+@stitch_options
 def fit(
     recording: Path,
     method: str,
@@ -174,7 +180,8 @@ def fit(
     if nurbs_json is not None and method != "nurbs":
         raise click.UsageError("--nurbs-json needs --method nurbs")
 
-    config = build_config(config_path, **shared)
+    stage, shared = split_stage_options(shared)
+    config = apply_stage_options(build_config(config_path, **shared), stage)
     config = config.override("skeleton", leaf_size_m=_mm(leaf_size_mm))
     config = config.override(
         "nurbs", smoothness=smoothness, control_points=control_points, degree=degree

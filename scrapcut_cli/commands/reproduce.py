@@ -12,8 +12,8 @@ import click
 from scrapcut_cli.commands._console import err, out
 from scrapcut_cli.commands._options import build_config, config_option
 
-#: With these defaults and the simulator's (640×480, sweep) the paper's five objects × two
-#: methods take about 30 s with two jobs on a 2-core machine (benchmarks/bench_reproduce.py).
+#: With these defaults and the simulator's (640×480, explore) the paper's five objects × two
+#: methods take about a minute with two jobs on a 2-core machine (benchmarks/bench_reproduce.py).
 DEFAULT_JOBS = 2
 DEFAULT_LEAF_SWEEP = "2,3,5,10,15,20"
 
@@ -53,7 +53,8 @@ def _names(values: tuple[str, ...]) -> list[str]:
     "--mode",
     type=click.Choice(["sweep", "explore"]),
     default=None,
-    help="Scan by pre-planned sweep or by exploration (Algorithm 1) (default: sweep).",
+    help="Scan by exploration (Algorithm 1, the paper's method) or by a pre-planned sweep "
+    "(default: explore; with --config, the file's sim.mode).",
 )
 @click.option("--seed", type=int, default=None, help="Simulator seed (default 0).")
 @click.option(
@@ -127,6 +128,8 @@ def reproduce(
     from scrapcut_cli.evaluation.reproduce import resolve_methods, resolve_objects
 
     config = build_config(config_path)
+    if mode is None and config_path is None:
+        mode = "explore"
     config = config.override("sim", noise=noise, mode=mode, seed=seed, width=width, height=height)
     if leaf_size_mm is not None:
         config = config.override("skeleton", leaf_size_m=leaf_size_mm / 1000.0)

@@ -180,19 +180,41 @@ def data_extent(
     A curve ending there neither stops short of the painted end nor overshoots it; the
     quantile ignores a few stray points.
     """
+    length = float(cumulative_length(polyline)[-1])
+    dist, arc = extended_positions(polyline, points, reach=reach, span=span)
+    return extent_of(arc[dist <= radius], quantile=quantile, length=length)
+
+
+def extent_of(positions: FloatArray, *, quantile: float, length: float) -> tuple[float, float]:
+    """The ``quantile`` and ``1 - quantile`` arc positions (N,) of the points near a polyline
+    of ``length`` metres (``(0, length)`` with fewer than two points): see
+    :func:`data_extent`."""
+    if len(positions) < 2:
+        return 0.0, float(length)
+    # The empirical quantile (no interpolation): a cloud given twice over ends at the same place.
+    lo, hi = np.quantile(positions, [quantile, 1.0 - quantile], method="inverted_cdf")
+    return float(lo), float(hi)
+
+
+def extended_positions(
+    polyline: FloatArray, points: FloatArray, *, reach: float = 0.05, span: float = 0.01
+) -> tuple[FloatArray, FloatArray]:
+    """Distance (N,) from each point to an ordered polyline (K, 3) extended straight by
+    ``reach`` metres along its end directions (chords over ``span``), and the arc length (N,)
+    of its nearest point relative to the polyline's own start (negative before it, beyond the
+    length after it): a paint point beyond an end of the curve still gets its lateral offset
+    and how far out it lies."""
+    dist, arc = arc_positions(extended_polyline(polyline, reach=reach, span=span), points)
+    return dist, np.asarray(arc - reach)
+
+
+def extended_polyline(polyline: FloatArray, *, reach: float, span: float = 0.01) -> FloatArray:
+    """The polyline (K, 3) with a straight piece of ``reach`` metres added at each end along
+    its end direction (a chord over ``span``): (K + 2, 3)."""
     s = cumulative_length(polyline)
-    length = float(s[-1])
     t0 = _end_direction(polyline, s, start=True, span=span)
     t1 = _end_direction(polyline, s, start=False, span=span)
-    extended = np.vstack([polyline[:1] + reach * t0, polyline, polyline[-1:] + reach * t1])
-    dist, arc = arc_positions(extended, points)
-    near = dist <= radius
-    if int(near.sum()) < 2:
-        return 0.0, length
-    pos = arc[near] - reach
-    # The empirical quantile (no interpolation): a cloud given twice over ends at the same place.
-    lo, hi = np.quantile(pos, [quantile, 1.0 - quantile], method="inverted_cdf")
-    return float(lo), float(hi)
+    return np.vstack([polyline[:1] + reach * t0, polyline, polyline[-1:] + reach * t1])
 
 
 def clip_to_extent(

@@ -20,7 +20,9 @@ The recipe (:func:`fit_nurbs`):
    spline rounds a 90-degree joint (the paper's I-beam and T-piece NURBS errors); the kink's
    control point settles on the corner instead.
 6. The curve is trimmed, or its end polynomials continued, to where the data begins and ends
-   (``end_quantile``), re-expressed exactly on clamped knots over [0, 1].
+   (``end_quantile``), then each end is moved back from the paint's tip to the centre of the
+   stroke's round cap (``end_trim``, :mod:`~scrapcut_cli.fitting.ends`), re-expressed exactly
+   on clamped knots over [0, 1] (``retarget_domain``): model and polyline end together.
 
 Objective, per metre of curve so that neither point density nor the control-point count
 changes what ``smoothness`` means::
@@ -63,10 +65,10 @@ from scrapcut_cli.fitting._common import (
     as_points,
     canonical_order,
     corner_indices,
-    data_extent,
     follows_input_order,
 )
 from scrapcut_cli.fitting.curve import Curve, NurbsModel
+from scrapcut_cli.fitting.ends import StrokeEnds, check_end_trim, stroke_ends
 from scrapcut_cli.fitting.ordering import geodesic_positions, voxel_centroids
 from scrapcut_cli.geometry import cumulative_length, resample_polyline
 
@@ -123,8 +125,10 @@ def fit_nurbs(points_base: ArrayLike, *, config: NurbsConfig | None = None) -> C
         ``method="nurbs"``; ``points`` the curve resampled every ``sample_spacing_m``;
         ``nurbs`` the model (degree, clamped knots on [0, 1], control points in the base frame,
         unit weights); ``info`` with ``rms_m``, ``max_residual_m``, ``iterations``,
-        ``control_points``, ``knots_inserted``, ``init``, ``length_m`` and more. The curve runs
-        in the direction of the input order (a stitched cloud's scan direction).
+        ``control_points``, ``knots_inserted``, ``init``, ``length_m``, the ends
+        (``stroke_half_width_m``, ``end_trim_m`` [start, end], ``end_shape``) and more. The
+        curve runs in the direction of the input order (a stitched cloud's scan direction) and
+        ends at the centres of the stroke's round caps (``end_trim``).
 
     Raises
     ------
@@ -178,7 +182,7 @@ def fit_nurbs(points_base: ArrayLike, *, config: NurbsConfig | None = None) -> C
     corners = 0
     if settings.corner_angle_deg > 0.0:
         fit, corners = _insert_corners(x, fit, settings)
-    fit = _to_data_extent(x_all, fit, settings)
+    fit, ends = _to_data_extent(x_all, fit, settings)
 
     dist = np.linalg.norm(fit.residuals, axis=1)
     model = NurbsModel(
@@ -190,6 +194,7 @@ def fit_nurbs(points_base: ArrayLike, *, config: NurbsConfig | None = None) -> C
     polyline = _sample_polyline(model, fit.length, config.sample_spacing_m)
     t_input = np.empty_like(fit.t)
     t_input[order] = fit.t
+    forward = follows_input_order(t_input)
     curve = Curve(
         points=polyline,
         method="nurbs",
@@ -211,9 +216,10 @@ def fit_nurbs(points_base: ArrayLike, *, config: NurbsConfig | None = None) -> C
             "points": len(pts),
             "smoothness": float(config.smoothness),
             "smoothing_length_m": float(ell),
+            **ends.info(mode=config.end_trim, forward=forward),
         },
     )
-    return curve if follows_input_order(t_input) else curve.reversed()
+    return curve if forward else curve.reversed()
 
 
 # --------------------------------------------------------------------------- geomdl export
@@ -270,6 +276,7 @@ def _check_config(config: NurbsConfig) -> None:
             raise FittingError(f"nurbs.{name} must be positive, got {getattr(config, name)}")
     if not 0.0 <= config.end_quantile < 0.5:
         raise FittingError(f"nurbs.end_quantile must be in [0, 0.5), got {config.end_quantile}")
+    check_end_trim(config.end_trim, config.end_trim_m, "nurbs")
 
 
 def _principal_parameters(x: FloatArray) -> tuple[FloatArray, float]:
@@ -628,27 +635,36 @@ def _kink_angles(fit: _Fit) -> FloatArray:
 # --------------------------------------------------------------------------- ends
 
 
-def _to_data_extent(x: FloatArray, fit: _Fit, config: NurbsConfig) -> _Fit:
-    """Trim or extend the curve to where the points ``x`` (all of them) begin and end along it
-    (exactly: the end spans' polynomials are continued, then re-expressed on clamped knots over
-    [0, 1]); the state returned is evaluated on ``x``."""
+def _to_data_extent(x: FloatArray, fit: _Fit, config: NurbsConfig) -> tuple[_Fit, StrokeEnds]:
+    """Trim or extend the curve to where the points ``x`` (all of them) begin and end along it,
+    each end then moved in to its round cap's centre (``end_trim``); exactly: the end spans'
+    polynomials are continued, then re-expressed on clamped knots over [0, 1]. The state
+    returned is evaluated on ``x``."""
     spline = fit.spline()
     ts = np.linspace(0.0, 1.0, max(int(fit.length / 0.0005), 200))
     dense = spline(ts)
     s = cumulative_length(dense)
     dist = np.linalg.norm(fit.residuals, axis=1)
     radius = max(2.0 * float(np.quantile(dist, 0.95)), 0.002)
-    s_lo, s_hi = data_extent(dense, x, quantile=config.end_quantile, radius=radius)
+    ends = stroke_ends(
+        dense,
+        x,
+        quantile=config.end_quantile,
+        radius=radius,
+        mode=config.end_trim,
+        trim_m=config.end_trim_m,
+    )
     speed0 = float(np.linalg.norm(spline(0.0, 1)))
     speed1 = float(np.linalg.norm(spline(1.0, 1)))
-    a = _arc_to_parameter(s_lo, ts, s, speed0, speed1)
-    b = _arc_to_parameter(s_hi, ts, s, speed0, speed1)
+    a = _arc_to_parameter(ends.start, ts, s, speed0, speed1)
+    b = _arc_to_parameter(ends.end, ts, s, speed0, speed1)
     knots, ctrl = fit.knots, fit.control_points
     if b - a > 1e-9 and (abs(a) >= 1e-9 or abs(b - 1.0) >= 1e-9):
         knots, ctrl = retarget_domain(knots, ctrl, fit.degree, a, b)
-    return _evaluate(
+    state = _evaluate(
         x, knots, ctrl, fit.degree, config, iterations=fit.iterations, mass=np.ones(len(x))
     )
+    return state, ends
 
 
 def _arc_to_parameter(

@@ -18,6 +18,8 @@ grid turns with the object and the result does not depend on its pose:
    principal-curve step), never averaging across a sharp corner (the two sides are centred
    apart and meet where their directions cross), trim or extend it to where the paint begins
    and ends, smooth lightly, resample.
+6. Move each end back from the paint's tip to the centre of the stroke's round cap
+   (``end_trim``, :mod:`~scrapcut_cli.fitting.ends`).
 
 The grid stays sparse: occupancy, closing and connectivity work on packed int64 voxel keys
 (only occupied voxels exist), and thinning runs on a dense box around the piece only when the
@@ -51,6 +53,7 @@ from scrapcut_cli.fitting._common import (
     moving_average,
 )
 from scrapcut_cli.fitting.curve import Curve
+from scrapcut_cli.fitting.ends import check_end_trim, stroke_ends
 from scrapcut_cli.fitting.ordering import tree_diameter
 from scrapcut_cli.geometry import PolylineDistance, cumulative_length, resample_polyline
 
@@ -107,8 +110,10 @@ def fit_skeleton(points_base: ArrayLike, *, config: SkeletonConfig | None = None
         ``method="skeleton"``, ``points`` resampled every ``sample_spacing_m`` and oriented with
         the input order; ``info`` with ``leaf_size_m``, ``pieces``, ``voxels``,
         ``skeleton_voxels``, ``pruned_branches``, ``rms_m``, ``max_residual_m``,
-        ``largest_dense_voxels``, ``blocks`` and ``skeleton_points`` (the ordered skeleton
-        vertices moved to the paint's centre, base frame, a list of [x, y, z]).
+        ``largest_dense_voxels``, ``blocks``, ``skeleton_points`` (the ordered skeleton
+        vertices moved to the paint's centre, base frame, a list of [x, y, z]) and the ends
+        (``stroke_half_width_m``, ``end_trim_m`` [start, end], ``end_shape``). The curve ends
+        at the centres of the stroke's round caps (``end_trim``).
 
     Raises
     ------
@@ -177,11 +182,22 @@ def fit_skeleton(points_base: ArrayLike, *, config: SkeletonConfig | None = None
             smoothing=int(config.smoothing_window),
         )
         centre = _extend_to_data(centre, paint, config, span=window)
+    ends = stroke_ends(
+        centre,
+        paint,
+        extent=(0.0, float(cumulative_length(centre)[-1])),
+        radius=config.refine_radius_m,
+        mode=config.end_trim,
+        trim_m=config.end_trim_m,
+        span=window,
+    )
+    centre = clip_to_extent(centre, ends.start, ends.end, span=window)
     polyline = resample_polyline(centre, config.sample_spacing_m)
 
     dist, u = arc_positions(polyline, x, step=0.00025)
     skeleton_points = _centre_vertices(path, polyline)
-    if not follows_input_order(u):
+    forward = follows_input_order(u)
+    if not forward:
         polyline = polyline[::-1].copy()
         skeleton_points = skeleton_points[::-1]
     near = dist[inside]
@@ -209,6 +225,7 @@ def fit_skeleton(points_base: ArrayLike, *, config: SkeletonConfig | None = None
             "length_m": float(cumulative_length(polyline)[-1]),
             "points": len(pts),
             "skeleton_points": frame.to_base(skeleton_points).tolist(),
+            **ends.info(mode=config.end_trim, forward=forward),
         },
     )
 
@@ -229,6 +246,7 @@ def _check_config(config: SkeletonConfig) -> None:
         )
     if not 0.0 <= config.end_quantile < 0.5:
         raise FittingError(f"skeleton.end_quantile must be in [0, 0.5), got {config.end_quantile}")
+    check_end_trim(config.end_trim, config.end_trim_m, "skeleton")
 
 
 # --------------------------------------------------------------------------- sparse voxel sets
@@ -594,6 +612,9 @@ def _trim(path: FloatArray, length: float) -> FloatArray:
 
 
 def _centre_vertices(path: FloatArray, centre: FloatArray) -> FloatArray:
-    """The skeleton's voxel path (K, 3) moved onto the centred curve (nearest points)."""
-    _, nearest, _ = PolylineDistance(centre).query(path)
-    return np.asarray(nearest)
+    """The skeleton's voxel path (K, 3) moved onto the centred curve (nearest points); the
+    vertices beyond the curve's ends (in a trimmed cap) are left out rather than piled up on
+    its end points, unless fewer than two would remain."""
+    _, nearest, u = PolylineDistance(centre).query(path)
+    inside = (u > 0.0) & (u < len(centre) - 1)
+    return np.asarray(nearest[inside] if inside.sum() >= 2 else nearest)
