@@ -185,6 +185,32 @@ def painted_stroke(
     return np.asarray(pts[rng.permutation(n)])
 
 
+def on_wire_grid(
+    points: FloatArray,
+    *,
+    pitch_m: float = 0.04,
+    wire_radius_m: float = 0.002,
+    angle_deg: float = 20.0,
+) -> FloatArray:
+    """The points (N, 3) of paint sprayed on z = 0 that land on a square wire mesh (M, 3).
+
+    Two families of wires in the x-y plane, at ``angle_deg`` and ``angle_deg + 90``, every
+    ``pitch_m``; a point is kept within ``wire_radius_m`` of a wire's axis (a wire basket).
+    """
+    keep = np.zeros(len(points), dtype=bool)
+    for angle in np.radians([angle_deg, angle_deg + 90.0]):
+        across = points[:, 0] * -np.sin(angle) + points[:, 1] * np.cos(angle)
+        keep |= np.abs((across + 0.5 * pitch_m) % pitch_m - 0.5 * pitch_m) <= wire_radius_m
+    return np.asarray(points[keep])
+
+
+def s_curve_on_plane(length: float = 0.5, n: int = 1001) -> tuple[FloatArray, FloatArray]:
+    """An S along x on the plane z = 0 (amplitude 30 mm, one period) and its normals (+z)."""
+    x = np.linspace(0.0, length, n)
+    curve = np.column_stack([x, 0.03 * np.sin(2.0 * np.pi * x / length), np.zeros(n)])
+    return curve, np.tile([0.0, 0.0, 1.0], (n, 1))
+
+
 def _stroke_half_width(
     s: FloatArray, width_m: float, ragged: float, phase: FloatArray
 ) -> FloatArray:

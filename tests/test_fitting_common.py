@@ -4,12 +4,21 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import apply_se3, corner_on_beam, line_on_plane, noisy_arc, random_se3
+from helpers import (
+    apply_se3,
+    corner_on_beam,
+    line_on_plane,
+    noisy_arc,
+    on_wire_grid,
+    painted_stroke,
+    random_se3,
+)
 
 from scrapcut_cli.errors import FittingError
 from scrapcut_cli.fitting._common import (
     CanonicalFrame,
     as_points,
+    band_fill,
     clip_to_extent,
     corner_indices,
     data_extent,
@@ -77,3 +86,15 @@ def test_moving_average_keeps_ends_and_lines():
     smooth = moving_average(noisy, 5)
     np.testing.assert_array_equal(smooth[[0, -1]], noisy[[0, -1]])
     assert np.std(smooth[2:-2, 1]) < np.std(noisy[2:-2, 1])
+
+
+def test_band_fill_tells_a_sprayed_stroke_from_paint_on_a_wire_mesh():
+    line, normals = line_on_plane(0.5)
+    stroke = painted_stroke(line, normals, seed=5, caps=True)
+    assert band_fill(line, stroke) > 0.95
+    # 4 mm wires every 40 mm, two layers: about a fifth of the band's area, but where a
+    # wire runs along the line its paint fills whole rows of cells.
+    assert 0.2 < band_fill(line, on_wire_grid(stroke, angle_deg=25.0)) < 0.6
+    # A thin line (a stroke narrower than a cell) counts as full.
+    thin = painted_stroke(line, normals, seed=5, width_m=0.004, noise_m=0.0002)
+    assert band_fill(line, thin) == 1.0
