@@ -38,9 +38,12 @@ def main() -> None:
     parser.add_argument("--width", type=int, default=SimConfig().width)
     parser.add_argument("--height", type=int, default=SimConfig().height)
     parser.add_argument("--leaf-sweep-mm", default=DEFAULT_LEAF_SWEEP, help="'none' to skip")
+    parser.add_argument(
+        "--mode", default="explore", choices=("explore", "sweep"), help="as make demo: explore"
+    )
     args = parser.parse_args()
 
-    config = ScrapcutConfig().override("sim", width=args.width, height=args.height)
+    config = ScrapcutConfig().override("sim", width=args.width, height=args.height, mode=args.mode)
     objects = args.objects.split(",")
     methods = args.methods.split(",")
     sweep = (
@@ -51,7 +54,8 @@ def main() -> None:
     print(f"machine: {machine_description()}")
     print(
         f"reproduce: {len(objects)} objects x {len(methods)} methods, {args.width}x{args.height}"
-        f" px, jobs {args.jobs}, leaf sweep {args.leaf_sweep_mm} mm, {args.repeat} run(s)"
+        f" px, {args.mode} mode, jobs {args.jobs}, leaf sweep {args.leaf_sweep_mm} mm,"
+        f" {args.repeat} run(s)"
     )
     walls = []
     result: ReproduceResult | None = None

@@ -2,7 +2,8 @@
 
 Subcommands live in ``scrapcut_cli.commands.<name>`` and are imported only when run, so
 ``scrapcut --help`` does not pay for numpy, open3d or pybullet. A :class:`ScrapcutError` becomes
-one line on stderr and exit code 1; usage errors exit with 2 (click's default).
+one line on stderr and exit code 1, as does an OS error on a named file (permission denied, disk
+full); usage errors exit with 2 (click's default).
 """
 
 from __future__ import annotations
@@ -93,6 +94,13 @@ class LazyGroup(click.Group):
         except ScrapcutError as exc:
             message = str(exc).strip().splitlines()
             raise KnownError(message[0] if message else type(exc).__name__) from exc
+        except OSError as exc:
+            # The file system refused a named file (no permission, disk full, a folder where a
+            # file should go): the user's to fix, not a bug. Other OS errors keep the traceback.
+            if exc.filename is None:
+                raise
+            reason = exc.strerror or type(exc).__name__
+            raise KnownError(f"{reason}: {exc.filename}") from exc
 
 
 def _available(name: str) -> bool:

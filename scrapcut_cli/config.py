@@ -284,14 +284,21 @@ def update_dataclass(obj: T, values: dict[str, Any], where: str) -> T:
             )
         default = getattr(obj, name)
         if default is not None and value is not None:
-            if isinstance(default, bool) and not isinstance(value, bool):
-                raise ConfigError(f"{where}.{name} must be true or false, got {value!r}")
-            if isinstance(default, int | float) and not isinstance(value, int | float):
-                raise ConfigError(f"{where}.{name} must be a number, got {value!r}")
-            if isinstance(default, str) and not isinstance(value, str):
+            if isinstance(default, bool):
+                if not isinstance(value, bool):
+                    raise ConfigError(f"{where}.{name} must be true or false, got {value!r}")
+            elif isinstance(default, int | float):
+                if isinstance(value, bool) or not isinstance(value, int | float):
+                    raise ConfigError(f"{where}.{name} must be a number, got {value!r}")
+                if isinstance(default, int) and not isinstance(value, int):
+                    # A count (neighbours, iterations, pixels) reaches libraries refusing floats.
+                    if not float(value).is_integer():
+                        raise ConfigError(f"{where}.{name} must be a whole number, got {value!r}")
+                    values[name] = int(value)
+                elif isinstance(default, float) and isinstance(value, int):
+                    values[name] = float(value)
+            elif isinstance(default, str) and not isinstance(value, str):
                 raise ConfigError(f"{where}.{name} must be a string, got {value!r}")
-            if isinstance(default, float) and isinstance(value, int):
-                values[name] = float(value)
         if isinstance(value, list):
             values[name] = tuple(value)
     return replace(obj, **values)  # type: ignore[type-var]

@@ -471,6 +471,46 @@ def write_scan(path: str | Path, scan: SyntheticScan, fmt: str, *, storage: str 
         raise ValueError(f"unknown format {fmt!r}")
 
 
+def tiny_recording(
+    path: str | Path, *, image_frame: str = "cam", depth_shape: tuple[int, int] = (4, 6)
+) -> Path:
+    """A one-frame 6 x 4 MCAP on the default topics, TF base -> flange -> cam (static).
+
+    ``image_frame`` names the images' frame (not "cam": no TF path); ``depth_shape`` other
+    than (4, 6) gives a colour/depth size mismatch.
+    """
+    from scrapcut_cli.recording.writer import McapWriter
+
+    path = Path(path)
+    camera = CameraModel(6, 4, 5.0, 5.0, 2.5, 1.5, frame_id=image_frame)
+    with McapWriter(path) as writer:
+        writer.write_tf(
+            0, [("base", "flange", np.eye(4)), ("flange", "cam", np.eye(4))], static=True
+        )
+        writer.write_camera_info(SCAN_INFO_TOPIC, 5, camera)
+        writer.write_image(SCAN_COLOR_TOPIC, 5, image_frame, np.zeros((4, 6, 3), np.uint8))
+        writer.write_image(SCAN_DEPTH_TOPIC, 5, image_frame, np.ones(depth_shape, np.uint16))
+    return path
+
+
+def assert_same_frames(a: Sequence[Any], b: Sequence[Any], *, atol_m: float = 0.0) -> None:
+    """Two non-empty lists of Frames are equal: index, stamp, camera, frames, pixels, extras,
+    and poses (within ``atol_m``; 0 = bit for bit)."""
+    assert len(a) == len(b) > 0
+    for x, y in zip(a, b, strict=True):
+        assert (x.index, x.stamp_ns, x.camera, x.base_frame, x.camera_frame) == (
+            y.index,
+            y.stamp_ns,
+            y.camera,
+            y.base_frame,
+            y.camera_frame,
+        )
+        np.testing.assert_array_equal(x.color, y.color)
+        np.testing.assert_array_equal(x.depth, y.depth)
+        np.testing.assert_allclose(x.T_base_cam, y.T_base_cam, rtol=0, atol=atol_m)
+        assert x.extras == y.extras
+
+
 def _write_scan_mcap(path: Path, scan: SyntheticScan) -> None:
     from scrapcut_cli.recording.writer import McapWriter
 
@@ -625,3 +665,16 @@ def _write_scan_ros1(path: Path, scan: SyntheticScan) -> None:
                     latching=int(item.topic == "/tf_static"),
                 )
             writer.write(connections[key], item.log_time, store.serialize_ros1(msg, msgtype))
+
+
+# --------------------------------------------------------------------------- CLI results
+
+
+def one_line_error(result: Any) -> str:
+    """The one stderr line of a ``CliRunner`` result that failed with a known error: exit code
+    1, a single ``scrapcut: error: ...`` line, no traceback. Returns that line."""
+    assert result.exit_code == 1, result.output
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("scrapcut: error: "), result.stderr
+    assert "Traceback" not in result.output
+    return str(lines[0])

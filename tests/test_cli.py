@@ -56,6 +56,30 @@ def test_known_error_is_one_line_exit_1() -> None:
     assert "Traceback" not in result.output
 
 
+def _group_raising(exc: BaseException) -> click.Group:
+    @click.group(cls=LazyGroup)
+    def group() -> None:
+        pass
+
+    @group.command()
+    def boom() -> None:
+        raise exc
+
+    group.get_command = lambda ctx, name: boom if name == "boom" else None  # type: ignore[method-assign]
+    group.list_commands = lambda ctx: ["boom"]  # type: ignore[method-assign]
+    return group
+
+
+def test_os_error_on_a_named_file_is_one_line_exit_1() -> None:
+    denied = PermissionError(13, "Permission denied", "/results/path.json")
+    result = CliRunner().invoke(_group_raising(denied), ["boom"])
+    assert result.exit_code == 1
+    assert result.output.strip() == "scrapcut: error: Permission denied: /results/path.json"
+    # Without a file name it is no user error: the exception escapes (a traceback).
+    result = CliRunner().invoke(_group_raising(OSError("socket trouble")), ["boom"])
+    assert isinstance(result.exception, OSError) and result.exit_code != 0
+
+
 def test_unknown_command_is_usage_error() -> None:
     result = CliRunner().invoke(cli, ["frobnicate"])
     assert result.exit_code == 2

@@ -27,6 +27,7 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
         ("out_dir", [], "ros2"),
         ("out_sqlite", ["--storage", "sqlite3"], "ros2"),
         ("out.mcap", [], "mcap"),
+        ("run[red].bag", [], "ros1"),  # brackets are part of the name, not rich markup
         ("looks_like.mcap", ["--format", "ros2"], "ros2"),  # --format beats the suffix
     ],
 )

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from helpers import one_line_error
 
 from scrapcut_cli.cli import cli
 
@@ -142,22 +143,15 @@ def test_coverage_option(files: dict[str, Path]) -> None:
 
 
 def test_no_reference_is_one_line_and_exit_1(files: dict[str, Path]) -> None:
-    result = run("eval", files["nurbs"])  # names a.mcap, which does not exist
-    assert result.exit_code == 1
-    lines = result.stderr.strip().splitlines()  # type: ignore[attr-defined]
-    assert len(lines) == 1
-    assert lines[0].startswith("scrapcut: error: ")
-    assert "a.mcap was not found; pass --reference" in lines[0]
-    assert "Traceback" not in result.output  # type: ignore[attr-defined]
+    line = one_line_error(run("eval", files["nurbs"]))  # names a.mcap, which does not exist
+    assert "a.mcap was not found; pass --reference" in line
 
 
 def test_not_a_path_file_is_one_line_and_exit_1(files: dict[str, Path]) -> None:
     bogus = files["dir"] / "bogus.json"
     bogus.write_text("[1, 2, 3]")
-    result = run("eval", bogus, "--reference", files["ref"])
-    assert result.exit_code == 1
-    assert "bogus.json: path file: expected a JSON object" in result.stderr  # type: ignore[attr-defined]
-    assert len(result.stderr.strip().splitlines()) == 1  # type: ignore[attr-defined]
+    line = one_line_error(run("eval", bogus, "--reference", files["ref"]))
+    assert "bogus.json: path file: expected a JSON object" in line
 
 
 def test_missing_path_file(files: dict[str, Path]) -> None:

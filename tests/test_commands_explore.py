@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner, Result
 from exploration_scenes import CylinderScan, LoopResult, explore, write_exploration_recording
+from helpers import one_line_error
 from perception_scenes import top_view
 
 from scrapcut_cli.cli import cli
@@ -22,14 +23,6 @@ from scrapcut_cli.perception.paint import PAINT_PRESETS
 
 def _run(*args: object) -> Result:
     return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
-
-
-def _one_line_error(result: Result) -> str:
-    assert result.exit_code == 1, result.output
-    lines = [line for line in result.stderr.splitlines() if line.strip()]
-    assert len(lines) == 1 and lines[0].startswith("scrapcut: error: "), result.stderr
-    assert "Traceback" not in result.output
-    return lines[0]
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +61,7 @@ def test_a_divergence_exits_1_with_one_line(
     bad = tmp_path / "bad.mcap"
     write_exploration_recording(bad, loop.frames, log, reference=CylinderScan().reference)
     result = _run("explore", bad)
-    line = _one_line_error(result)
+    line = one_line_error(result)
     assert "diverged from the log" in line and "step 1: size" in line
     assert "differs" in result.stdout  # the table marks the step
 
@@ -102,12 +95,12 @@ def test_planner_options_need_what_if(explored: tuple[Path, LoopResult]) -> None
 
 def test_known_errors_are_one_line(explored: tuple[Path, LoopResult], tmp_path: Path) -> None:
     path, loop = explored
-    line = _one_line_error(_run("explore", path, "--method", "skeleton"))
+    line = one_line_error(_run("explore", path, "--method", "skeleton"))
     assert "explored with nurbs" in line
     bare = tmp_path / "bare.mcap"
     write_exploration_recording(bare, loop.frames[:1], [{}])
-    assert "no exploration log" in _one_line_error(_run("explore", bare))
-    assert "recording not found" in _one_line_error(_run("explore", tmp_path / "missing.mcap"))
+    assert "no exploration log" in one_line_error(_run("explore", bare))
+    assert "recording not found" in one_line_error(_run("explore", tmp_path / "missing.mcap"))
 
 
 @pytest.mark.slow

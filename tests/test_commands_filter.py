@@ -135,3 +135,36 @@ def test_bad_output_name_is_a_usage_error(scene: tuple[Path, list[Frame]]) -> No
     path, _ = scene
     code, _, err = run("filter", str(path), "-o", "clouds.ply")
     assert code == 2 and ".mcap" in err
+
+
+def test_an_existing_folder_is_replaced_only_if_filter_wrote_it(
+    scene: tuple[Path, list[Frame]], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path, _ = scene
+    data = tmp_path / "data"
+    data.mkdir()
+    (data / "notes.txt").write_text("keep me")
+    code, _, err = run("filter", str(path), "-o", str(data))
+    assert code == 2 and "would be replaced as a whole" in err
+    assert (data / "notes.txt").read_text() == "keep me"
+    monkeypatch.chdir(data)
+    code, _, err = run("filter", str(path), "-o", ".")
+    assert code == 2 and "holds the current folder" in err
+    assert sorted(p.name for p in data.iterdir()) == ["notes.txt"]
+    # A folder an earlier run wrote is replaced whole: no stale frame survives.
+    clouds = tmp_path / "clouds"
+    assert run("filter", str(path), "-o", str(clouds))[0] == 0
+    (clouds / "paint_000099.ply").write_text("stale")
+    assert run("filter", str(path), "-o", str(clouds))[0] == 0
+    assert len(list(clouds.iterdir())) == 5 and not (clouds / "paint_000099.ply").exists()
+    (tmp_path / "file").write_text("")
+    code, _, err = run("filter", str(path), "-o", str(tmp_path / "file"))
+    assert code == 2 and "is not a folder" in err
+
+
+def test_the_recording_is_not_overwritten(scene: tuple[Path, list[Frame]]) -> None:
+    path, _ = scene
+    before = path.read_bytes()
+    code, _, err = run("filter", str(path), "-o", str(path))
+    assert code == 2 and "is the recording itself" in err
+    assert path.read_bytes() == before

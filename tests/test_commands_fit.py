@@ -91,8 +91,15 @@ def test_fit_writes_the_path_file_and_every_export(
     assert len(csv_rows) == len(path) + 1
     _check_mcap(tmp_path / "out" / "path.mcap", len(path))
     if method == "nurbs":
-        geomdl_json = json.loads((tmp_path / "nurbs.json").read_text())
-        assert geomdl_json  # geomdl's own format, checked by the fitting tests
+        # geomdl's own format (its evaluation is checked by the fitting tests): the same NURBS
+        # as the path file's.
+        assert curve.nurbs is not None
+        (shape,) = json.loads((tmp_path / "nurbs.json").read_text())["shape"]["data"]
+        assert shape["degree"] == curve.nurbs.degree
+        np.testing.assert_array_equal(shape["knotvector"], curve.nurbs.knots)
+        np.testing.assert_array_equal(shape["control_points"]["points"], curve.nurbs.control_points)
+    else:
+        assert curve.nurbs is None
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
         "path.csv",
         "path.json",
@@ -161,6 +168,31 @@ def test_errors_are_one_line_and_leave_no_output(
     usage = _run("fit", rec, "-o", rec.with_suffix(".json"), "--mcap")
     assert usage.exit_code == 2 and "would overwrite the recording" in usage.output
     assert rec.read_bytes() == before and not rec.with_suffix(".json").exists()
+
+
+def test_tool_path_options_are_checked_before_the_recording_is_read(
+    scene: tuple[Path, np.ndarray],
+) -> None:
+    from scrapcut_cli.config import ScrapcutConfig
+    from scrapcut_cli.errors import ToolpathError
+    from scrapcut_cli.toolpath.recipe import fit_recording
+
+    rec, _ = scene
+    frames_read: list[int] = []
+    for option, message in (
+        ({"material": "unobtainium"}, "unknown material"),
+        ({"thickness_mm": 900.0}, "outside the mild_steel chart"),
+        ({"spacing_m": 0.0}, "spacing_m must be positive"),
+    ):
+        config = ScrapcutConfig().override("toolpath", **option)
+        with pytest.raises(ToolpathError, match=message):
+            fit_recording(
+                rec,
+                method="nurbs",
+                config=config,
+                progress=lambda done, _: frames_read.append(done),
+            )
+    assert frames_read == []  # failed at once, not after stitching every frame
 
 
 # --------------------------------------------------------------------------- simulator recordings

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -14,11 +15,11 @@ from helpers import (
     SCAN_INFO_TOPIC,
     SyntheticScan,
     synthetic_scan,
+    tiny_recording,
     write_scan,
 )
 
 from scrapcut_cli.cli import cli
-from scrapcut_cli.recording.frame import CameraModel
 from scrapcut_cli.recording.writer import McapWriter
 
 
@@ -101,6 +102,22 @@ def test_tables_name_every_topic_whole(recording: Path) -> None:
     assert "4 usable, 2 skipped (no_depth 1, pose_out_of_range 1)" in result.stdout
 
 
+def test_tables_stay_readable_on_a_simulated_recording(tmp_path: Path) -> None:
+    # The simulator's metadata holds a JSON of every parameter (kB): shown in --json only.
+    # Brackets in the name are text, not rich markup.
+    fixture = tmp_path / "scan[bold].mcap"
+    shutil.copy(
+        Path(__file__).resolve().parents[1] / "fixtures" / "sim_cylinder_small.mcap", fixture
+    )
+    result = _run(str(fixture))
+    assert result.exit_code == 0, result.output
+    assert "scan[bold].mcap" in result.stdout
+    assert "object=cylinder" in result.stdout and "params=(" in result.stdout
+    assert max(len(line) for line in result.stdout.splitlines()) < 120
+    data = json.loads(_run(str(fixture), "--json").stdout)
+    assert json.loads(data["metadata"]["scrapcut"]["params"])["sim"]["views"] == 6
+
+
 # --------------------------------------------------------------------------- bad input
 
 
@@ -145,18 +162,6 @@ def test_missing_topics(recording: Path, option: str, topic: str, expected: str)
     )
 
 
-def _tiny(path: Path, *, depth_shape: tuple[int, int] = (4, 6), frame: str = "cam") -> Path:
-    camera = CameraModel(6, 4, 5.0, 5.0, 2.5, 1.5, frame_id=frame)
-    with McapWriter(path) as writer:
-        writer.write_tf(
-            0, [("base", "flange", np.eye(4)), ("flange", "cam", np.eye(4))], static=True
-        )
-        writer.write_camera_info(SCAN_INFO_TOPIC, 5, camera)
-        writer.write_image(SCAN_COLOR_TOPIC, 5, frame, np.zeros((4, 6, 3), np.uint8))
-        writer.write_image(SCAN_DEPTH_TOPIC, 5, frame, np.ones(depth_shape, np.uint16))
-    return path
-
-
 def test_default_topics_missing(tmp_path: Path) -> None:
     path = tmp_path / "left.mcap"
     with McapWriter(path) as writer:
@@ -167,22 +172,22 @@ def test_default_topics_missing(tmp_path: Path) -> None:
 
 
 def test_no_tf_path(tmp_path: Path) -> None:
-    path = _tiny(tmp_path / "lost.mcap", frame="camera_optical")
+    path = tiny_recording(tmp_path / "lost.mcap", image_frame="camera_optical")
     _assert_one_line_error(_run(str(path)), "'camera_optical'", "TF frames: base, cam, flange")
     _assert_one_line_error(
-        _run(str(_tiny(tmp_path / "ok.mcap")), "--base-frame", "world"),
+        _run(str(tiny_recording(tmp_path / "ok.mcap")), "--base-frame", "world"),
         "'world'",
         "TF frames: base, cam, flange",
     )
 
 
 def test_color_depth_size_mismatch(tmp_path: Path) -> None:
-    path = _tiny(tmp_path / "mismatch.mcap", depth_shape=(2, 3))
+    path = tiny_recording(tmp_path / "mismatch.mcap", depth_shape=(2, 3))
     _assert_one_line_error(_run(str(path)), "6x4", "3x2", "--depth-topic")
 
 
 def test_a_good_tiny_recording_works(tmp_path: Path) -> None:
-    result = _run(str(_tiny(tmp_path / "ok.mcap")), "--json")
+    result = _run(str(tiny_recording(tmp_path / "ok.mcap")), "--json")
     assert result.exit_code == 0, result.output
     data = json.loads(result.stdout)
     assert data["frames"]["usable"] == 1

@@ -68,6 +68,29 @@ def test_record_writes_a_readable_mcap_with_the_options_applied(tmp_path: Path) 
         assert rec.plan().usable == 2 and rec.camera.width == 48
 
 
+def test_explore_mode_runs_algorithm_1_and_logs_its_steps(tmp_path: Path) -> None:
+    out = tmp_path / "explore.mcap"
+    args = ["record", "--mode", "explore", "--object", "planar_box", "--method", "skeleton"]
+    args += ["--hsv", "5,45,0.6,0.3", "--width", "96", "--height", "72"]
+    result = CliRunner().invoke(cli, [*args, "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    with open_recording(out) as rec:
+        log = rec.exploration_log()
+        frames = rec.plan().usable
+        assert rec.metadata["scrapcut"]["mode"] == "explore"
+    assert frames >= 2 and len(log) == frames  # one decision logged per observed view
+    assert log[-1]["stop"] is True
+    # --method and --hsv reach the planner; the piece is still painted with the preset.
+    assert log[0]["method"] == "skeleton"
+    hsv = log[0]["paint_hsv"]
+    assert (hsv["hue_min_deg"], hsv["hue_max_deg"], hsv["sat_min"], hsv["val_min"]) == (
+        5.0,
+        45.0,
+        0.6,
+        0.3,
+    )
+
+
 def test_config_file_sets_simulator_parameters(tmp_path: Path) -> None:
     config = tmp_path / "sim.toml"
     config.write_text("[sim]\nobject = 'slanted'\nviews = 1\nwidth = 32\nheight = 24\n")
@@ -96,3 +119,7 @@ def test_usage_errors_exit_with_two(tmp_path: Path) -> None:
     assert CliRunner().invoke(cli, ["record"]).exit_code == 2  # no -o
     bad = CliRunner().invoke(cli, ["record", "--noise", "foggy", "-o", str(tmp_path / "x.mcap")])
     assert bad.exit_code == 2
+    # Always MCAP: a file named scan.bag would not open in any reader.
+    bag = CliRunner().invoke(cli, ["record", "--views", "1", "-o", str(tmp_path / "scan.bag")])
+    assert bag.exit_code == 2 and "name the file *.mcap" in bag.output
+    assert list(tmp_path.iterdir()) == []

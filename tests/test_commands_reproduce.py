@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner, Result
+from helpers import one_line_error
 
 from scrapcut_cli.cli import cli
 from scrapcut_cli.config import load_config
@@ -108,17 +109,13 @@ def test_scrapcut_eval_gives_the_same_figures(small_run: tuple[Path, Result]) ->
 
 
 def test_unknown_object_is_one_line(tmp_path: Path) -> None:
-    result = run("reproduce", "--objects", "teapot", "-o", tmp_path / "out")
-    assert result.exit_code == 1
-    lines = result.stderr.strip().splitlines()
-    assert lines[-1].startswith("scrapcut: error: unknown object 'teapot'; known: cylinder")
-    assert "Traceback" not in result.output
+    line = one_line_error(run("reproduce", "--objects", "teapot", "-o", tmp_path / "out"))
+    assert line.startswith("scrapcut: error: unknown object 'teapot'; known: cylinder")
 
 
 def test_unknown_method_is_one_line(tmp_path: Path) -> None:
-    result = run("reproduce", "--methods", "nurbs,spline", "-o", tmp_path / "out")
-    assert result.exit_code == 1
-    assert "unknown method 'spline'; known: nurbs, skeleton" in result.stderr
+    line = one_line_error(run("reproduce", "--methods", "nurbs,spline", "-o", tmp_path / "out"))
+    assert "unknown method 'spline'; known: nurbs, skeleton" in line
 
 
 @pytest.mark.slow
@@ -137,9 +134,17 @@ def test_explore_mode_is_the_default_and_scans_once_per_method(tmp_path: Path) -
     assert not (out / "plots").exists()
 
 
+@pytest.mark.parametrize("sweep", ["2,x", "inf", "0,5"])
+def test_a_bad_leaf_sweep_is_a_usage_error(tmp_path: Path, sweep: str) -> None:
+    result = run("reproduce", "--objects", "cylinder", "--leaf-sweep-mm", sweep, "-o",
+                 tmp_path / "out")  # fmt: skip
+    assert result.exit_code == 2
+    assert "expected positive millimetres" in result.stderr
+    assert not (tmp_path / "out").exists()
+
+
 def test_refuses_a_folder_that_is_not_a_reproduce_output(tmp_path: Path) -> None:
     (tmp_path / "notes.txt").write_text("keep me")
-    result = run("reproduce", "--objects", "cylinder", "-o", tmp_path)
-    assert result.exit_code == 1
-    assert "is not a scrapcut reproduce output; choose another -o" in result.stderr
+    line = one_line_error(run("reproduce", "--objects", "cylinder", "-o", tmp_path))
+    assert "is not a scrapcut reproduce output; choose another -o" in line
     assert (tmp_path / "notes.txt").read_text() == "keep me"

@@ -88,6 +88,17 @@ def test_no_paint_fails_in_one_line_and_writes_nothing(recording: Path, tmp_path
     assert list(tmp_path.iterdir()) == []
 
 
+def test_empty_surface_fails_before_either_cloud_is_written(
+    recording: Path, tmp_path: Path
+) -> None:
+    cloud, surface = tmp_path / "paint.ply", tmp_path / "surface.ply"
+    args = ["stitch", str(recording), "-o", str(cloud), "--surface", str(surface)]
+    code, _, err = run(*args, "--surface-band-mm", "0")
+    assert code == 1 and err.count("\n") == 1
+    assert "no surface points to write to" in err and "--surface-band-mm" in err
+    assert list(tmp_path.iterdir()) == []  # not the paint cloud alone either
+
+
 def test_usage_errors(recording: Path, tmp_path: Path) -> None:
     assert run("stitch", str(recording), "-o", str(tmp_path / "a.xyz"))[0] == 2
     same = str(tmp_path / "a.ply")

@@ -34,6 +34,11 @@ def test_int_is_accepted_for_float_fields_and_lists_become_tuples() -> None:
     config = config_from_dict({"nurbs": {"smoothness": 1}, "paint": {"hsv": [10, 40, 0.6, 0.3]}})
     assert isinstance(config.nurbs.smoothness, float)
     assert config.paint.hsv == (10, 40, 0.6, 0.3)
+    # A whole float is accepted for a count and becomes an int (open3d refuses 20.0).
+    config = config_from_dict({"perception": {"sor_neighbors": 30.0}, "stitch": {"icp": True}})
+    assert isinstance(config.perception.sor_neighbors, int)
+    assert config.perception.sor_neighbors == 30
+    assert config.stitch.icp is True
 
 
 def test_round_trip_through_dict() -> None:
@@ -48,6 +53,8 @@ def test_round_trip_through_dict() -> None:
         ("[nurb]\nsmoothness = 1.0\n", r"unknown section \[nurb\]"),
         ("[nurbs]\nsmoothness = 'high'\n", "must be a number"),
         ("[stitch]\nicp = 1\n", "true or false"),
+        ("[perception]\nsor_neighbors = 2.5\n", "perception.sor_neighbors must be a whole number"),
+        ("[nurbs]\nsmoothness = true\n", "nurbs.smoothness must be a number"),
         ("[nurbs\n", "cannot read configuration"),
     ],
 )

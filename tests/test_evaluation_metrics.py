@@ -166,9 +166,11 @@ def test_bad_curves_raise_one_clear_error(curve: np.ndarray, message: str) -> No
 def test_bad_reference_and_config_raise() -> None:
     with pytest.raises(EvaluationError, match="reference needs at least two"):
         path_error(line(0.0, 0.1), np.zeros((1, 3)))
-    with pytest.raises(EvaluationError, match="sample_spacing_m must be positive"):
+    with pytest.raises(EvaluationError, match="sample_spacing_m must be a finite number > 0"):
         path_error(line(0.0, 0.1), line(0.0, 0.1), config=EvaluationConfig(sample_spacing_m=0))
-    with pytest.raises(EvaluationError, match="coverage_threshold_m must be positive"):
+    with pytest.raises(EvaluationError, match="sample_spacing_m must be a finite number > 0"):
+        path_error(line(0.0, 0.1), line(0.0, 0.1), config=EvaluationConfig(sample_spacing_m=np.inf))
+    with pytest.raises(EvaluationError, match="coverage_threshold_m must be a finite number > 0"):
         path_error(
             line(0.0, 0.1), line(0.0, 0.1), config=EvaluationConfig(coverage_threshold_m=-1.0)
         )

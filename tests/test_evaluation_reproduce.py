@@ -63,6 +63,15 @@ def test_bad_options_fail_before_any_work(tmp_path: Path) -> None:
         reproduce(out, objects=["cylinder"], methods=["nurbs"], config=explore)
     with pytest.raises(EvaluationError, match="jobs must be at least 1"):
         reproduce(out, objects=["cylinder"], methods=["nurbs"], config=ScrapcutConfig(), jobs=0)
+    # Before, an infinite leaf passed the check and reached scipy after the scan (a traceback).
+    with pytest.raises(EvaluationError, match="leaf sizes must be positive"):
+        reproduce(
+            out,
+            objects=["cylinder"],
+            methods=["skeleton"],
+            config=ScrapcutConfig(),
+            leaf_sweep_m=[0.005, float("inf")],
+        )
     assert not out.exists()
 
 
@@ -161,3 +170,34 @@ def test_a_broken_skeleton_is_retried_once_at_the_larger_leaf(
         assert row.source == "paths/basket_skeleton.json"
     else:
         assert row.error is None and row.failure is not None and failure in row.failure
+
+
+def test_a_path_that_cannot_be_measured_is_a_failed_row(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A curve collapsed to one point fits but cannot be measured: the row fails, the run goes
+    # on (before, the EvaluationError escaped and aborted every object).
+    from scrapcut_cli.evaluation import reproduce as rp
+    from scrapcut_cli.evaluation.sources import Reference
+    from scrapcut_cli.toolpath import recipe
+
+    reference = np.column_stack([np.linspace(0, 0.3, 31), np.zeros(31), np.zeros(31)])
+
+    def fake_fit(stitched: object, *, method: str, config: ScrapcutConfig) -> _FakeFit:
+        return _FakeFit(np.zeros((5, 3)), method, {})
+
+    monkeypatch.setattr(recipe, "fit_stitched", fake_fit)
+    (tmp_path / "paths").mkdir()
+    row = rp._fit_and_evaluate(
+        "cylinder",
+        "nurbs",
+        object(),  # type: ignore[arg-type]
+        Reference(points=reference, origin=tmp_path / "x.mcap", object="cylinder"),
+        config=ScrapcutConfig(),
+        out_dir=tmp_path,
+        retry_leaf_size_m=0.020,
+    )
+    assert row.error is None
+    assert row.failure is not None and "fitted curve needs at least two distinct points" in (
+        row.failure
+    )

@@ -66,6 +66,8 @@ def test_csv_reference_round_trip(tmp_path: Path) -> None:
         ("a,b,c\n1,2,3\n4,5,6\n", "must start with the header x,y,z"),
         ("x,y,z\n1,2,3\n", "needs at least two rows"),
         ("x,y,z\n1,2,3\n4,five,6\n", "cannot read reference CSV"),
+        ("x,y,z\n", "needs at least two rows"),  # no rows: an error, not a numpy warning
+        ("x,y,z\n1,2,3\n4,5,6\n7,nan,9\n", r"1 row\(s\) with NaN or infinite .*line 4\)$"),
     ],
 )
 def test_bad_csv_references(tmp_path: Path, text: str, message: str) -> None:
@@ -73,6 +75,13 @@ def test_bad_csv_references(tmp_path: Path, text: str, message: str) -> None:
     path.write_text(text)
     with pytest.raises(EvaluationError, match=message):
         read_reference_csv(path)
+
+
+def test_csv_reference_with_a_byte_order_mark(tmp_path: Path) -> None:
+    # A spreadsheet's "CSV UTF-8" export starts with a BOM; the header is still x,y,z.
+    path = write_reference_csv(tmp_path / "ref.csv", REFERENCE)
+    path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes())
+    np.testing.assert_array_equal(read_reference_csv(path), REFERENCE)
 
 
 def test_missing_references(tmp_path: Path) -> None:

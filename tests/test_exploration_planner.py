@@ -228,6 +228,15 @@ def test_bad_parameters_are_named() -> None:
             hsv=ORANGE,
             config=_config(min_distance_m=0.4, max_distance_m=0.3),
         )
+    # Infinite lengths passed the old "> 0" check.
+    with pytest.raises(ExplorationError, match=r"exploration\.step_m must be a finite number > 0"):
+        ExplorationPlanner(
+            np.eye(4), reachable=_always, hsv=ORANGE, config=_config(step_m=float("inf"))
+        )
+    with pytest.raises(ExplorationError, match=r"exploration\.inflation_m must be a finite"):
+        ExplorationPlanner(
+            np.eye(4), reachable=_always, hsv=ORANGE, config=_config(inflation_m=float("nan"))
+        )
     with pytest.raises(ExplorationError, match="initial view"):
         ExplorationPlanner(np.zeros((3, 3)), reachable=_always, hsv=ORANGE)
 

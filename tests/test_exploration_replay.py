@@ -13,7 +13,7 @@ from perception_scenes import top_view
 
 from scrapcut_cli.config import ScrapcutConfig
 from scrapcut_cli.errors import ExplorationError
-from scrapcut_cli.exploration.planner import ExplorationPlanner, pose_to_dict
+from scrapcut_cli.exploration.planner import ExplorationPlanner, pose_from_dict, pose_to_dict
 from scrapcut_cli.exploration.replay import (
     NearestView,
     RecordedAnswers,
@@ -122,6 +122,20 @@ def test_recorded_answers_check_the_asked_pose() -> None:
     assert answers.divergences[-1] == "step 4: 1 logged reachability queries were not asked"
 
 
+@pytest.mark.parametrize(
+    "pose",
+    [
+        {"position": [0.0, 0.0, 0.5]},
+        {"position": [0.0, 0.0, 0.5], "orientation_xyzw": [0.0, 0.0, 0.0, 0.0]},
+        {"position": [0.0, float("nan"), 0.5], "orientation_xyzw": [0.0, 0.0, 0.0, 1.0]},
+    ],
+)
+def test_a_malformed_logged_pose_is_one_error(pose: dict[str, Any]) -> None:
+    # A zero quaternion was divided by its norm (NaN pose and a numpy warning).
+    with pytest.raises(ExplorationError, match="malformed pose in the exploration log"):
+        pose_from_dict(pose)
+
+
 def test_nearest_view_weighs_position_and_viewing_angle() -> None:
     down = look_at([0.5, 0.0, 0.3], [0.5, 0.0, 0.0])
     near_tilted = look_at([0.52, 0.0, 0.3], [0.7, 0.0, 0.0])  # 2 cm off, looking 34 deg away
@@ -172,6 +186,15 @@ def test_what_if_parameters_change_the_outcome(survey: Path) -> None:
     assert blind.error.coverage < default.error.coverage
     with pytest.raises(ExplorationError, match="start frame 999"):
         what_if(survey, config=ScrapcutConfig(), start_frame=999)
+
+
+def test_what_if_refuses_bad_parameters_before_reading_frames(survey: Path) -> None:
+    # Before, every frame was perceived first and the planner refused the range at the end.
+    read: list[int] = []
+    bad = ScrapcutConfig().override("exploration", min_distance_m=0.5, max_distance_m=0.3)
+    with pytest.raises(ExplorationError, match="max_distance_m"):
+        what_if(survey, config=bad, progress=lambda done, total: read.append(done))
+    assert read == []
 
 
 @pytest.mark.slow

@@ -75,6 +75,24 @@ def test_extrapolate_a_plain_polyline():
     np.testing.assert_allclose(point, [0.0, 0.12, 0.0])
 
 
+@pytest.mark.parametrize("method", METHODS)
+def test_a_reversed_curve_extrapolates_from_its_own_ends(ordered_line, method):
+    # reversed() turns the ordered info with the curve: the skeleton's vertices (its end
+    # directions) and the per-end trims. Before, a reversed skeleton kept the vertices in the
+    # old order and its "start" direction came from the other end of the line.
+    curve = fit_curve(ordered_line, method, ScrapcutConfig())
+    back = curve.reversed()
+    for ours, theirs in (("start", "end"), ("end", "start")):
+        point, direction = extrapolate_end(back, ours, step_m=0.05)
+        expected_point, expected_direction = extrapolate_end(curve, theirs, step_m=0.05)
+        np.testing.assert_allclose(direction, expected_direction, atol=1e-9)
+        np.testing.assert_allclose(point, expected_point, atol=1e-9)
+    assert back.info["end_trim_m"] == curve.info["end_trim_m"][::-1]
+    assert back.info["end_trim_start_m"] == curve.info["end_trim_end_m"]
+    assert back.info["end_shape"] == curve.info["end_shape"][::-1]
+    assert back.reversed().info == curve.info
+
+
 @pytest.mark.parametrize(("end", "step"), [("middle", 0.1), ("end", -0.1)])
 def test_extrapolate_rejects_bad_arguments(end, step):
     curve = Curve(points=np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0]]), method="other")

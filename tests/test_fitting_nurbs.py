@@ -264,6 +264,16 @@ def test_density_does_not_change_the_fit():
     assert np.abs(once.points - twice.points).max() < 1e-6
 
 
+def test_exact_collinear_points_fit_without_warnings():
+    # Noise-free points, each repeated: the bending energy is ~0 and round-off made it
+    # negative (sqrt of a negative objective: RuntimeWarning, an error under pytest).
+    line = np.column_stack([np.linspace(0.0, 0.3, 30), np.zeros(30), np.zeros(30)])
+    curve = fit_nurbs(np.repeat(line, 50, axis=0))
+    assert curve.info["objective_m2"] >= 0.0
+    assert PolylineDistance(line).distance(curve.points).max() < 1e-6  # on the line
+    assert abs(curve.length - 0.3) < 0.001
+
+
 def test_input_is_not_modified(helix_fit):
     pts = helix_fit[0]
     before = pts.copy()
@@ -318,7 +328,11 @@ def test_bad_clouds_raise_one_line(points, message):
         (NurbsConfig(degree=0), "degree"),
         (NurbsConfig(control_points=2), "control points"),
         (NurbsConfig(init="pca"), "unknown NURBS init"),
-        (NurbsConfig(smoothness=-1.0), "smoothness"),
+        (NurbsConfig(smoothness=-1.0), r"nurbs.smoothness must be a finite number >= 0"),
+        # Before, NaN or infinite smoothness reached scipy's solver (a ValueError traceback).
+        (NurbsConfig(smoothness=float("nan")), r"nurbs.smoothness must be a finite number >= 0"),
+        (NurbsConfig(smoothness=float("inf")), r"nurbs.smoothness must be a finite number >= 0"),
+        (NurbsConfig(sample_spacing_m=0.0), r"nurbs.sample_spacing_m must be a finite number > 0"),
     ],
 )
 def test_bad_options_raise(config, message):

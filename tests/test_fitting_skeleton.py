@@ -200,7 +200,11 @@ def test_input_is_not_modified(pipe):
 @pytest.mark.parametrize(
     ("config", "message"),
     [
-        (SkeletonConfig(leaf_size_m=0.0), "leaf_size_m must be positive"),
+        (SkeletonConfig(leaf_size_m=0.0), r"leaf_size_m must be a finite number > 0, got 0.0"),
+        # Before, an infinite leaf reached scipy (a ValueError traceback through the CLI).
+        (SkeletonConfig(leaf_size_m=float("inf")), r"leaf_size_m must be a finite number > 0"),
+        (SkeletonConfig(leaf_size_m=float("nan")), r"leaf_size_m must be a finite number > 0"),
+        (SkeletonConfig(prune_length_m=-0.01), r"prune_length_m must be a finite number >= 0"),
         (SkeletonConfig(closing_voxels=-1), "closing_voxels"),
         (SkeletonConfig(max_block_voxels=10), "max_block_voxels"),
         (SkeletonConfig(refine_window_m=-0.01), "refine_window_m"),
@@ -215,6 +219,14 @@ def test_bad_options_raise(config, message):
 def test_too_few_points():
     with pytest.raises(FittingError, match="at least"):
         fit_skeleton(np.zeros((2, 3)))
+
+
+def test_paint_within_one_voxel_is_one_line():
+    # A 1 mm dab at a 5 mm leaf thins to one voxel: before, an IndexError from the end
+    # directions of a one-vertex path.
+    dab = np.column_stack([np.linspace(0.0, 0.001, 50), np.zeros(50), np.zeros(50)])
+    with pytest.raises(FittingError, match=r"^skeleton fit: the paint thins to a single 5 mm"):
+        fit_skeleton(dab)
 
 
 def test_tiles_too_small_for_the_margin():

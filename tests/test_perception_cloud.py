@@ -16,6 +16,7 @@ from perception_scenes import (
     small_camera,
     top_view,
 )
+from scipy.spatial import cKDTree
 
 from scrapcut_cli.config import PerceptionConfig
 from scrapcut_cli.errors import PerceptionError
@@ -28,6 +29,7 @@ from scrapcut_cli.geometry import (
 from scrapcut_cli.perception.cloud import (
     SKIP_NO_PAINT,
     SKIP_NO_VALID_DEPTH,
+    SKIP_SCATTERED_PAINT,
     SKIP_TOO_LITTLE_PAINT,
     PerceptionTally,
     backproject_paint,
@@ -183,8 +185,10 @@ def test_surface_band_flanks_the_stroke_on_both_sides(
     _, nearest, _ = PolylineDistance(reference).query(surface)
     side = np.sign(surface[:, 1] - nearest[:, 1])
     assert np.mean(side > 0) > 0.25 and np.mean(side < 0) > 0.25
-    # Downsampled: no two surface points share a surface voxel's neighbourhood too closely.
-    assert len(surface) < clouds.valid_paint_pixels * 10
+    # Downsampled to surface voxels: neighbours about a voxel apart (3.2 mm here), not the
+    # pixel grid's half voxel (2.0 mm without the downsampling).
+    spacing = np.median(cKDTree(surface).query(surface, k=2)[0][:, 1])
+    assert spacing > 0.65 * CONFIG.surface_voxel_m
 
 
 def test_skip_reasons(reference: np.ndarray, exact_frame: Frame) -> None:
@@ -254,8 +258,11 @@ def test_tally_counts_and_explains_paint_without_depth(exact_frame: Frame) -> No
     holes = replace(exact_frame, depth=np.full_like(exact_frame.depth, np.nan))
     tally = PerceptionTally(ORANGE)
     tally.add(process_frame(holes, ORANGE, CONFIG), holes.color)
-    with pytest.raises(PerceptionError, match="no usable paint points"):
+    with pytest.raises(PerceptionError, match="no usable paint points") as info:
         tally.raise_if_no_paint()
+    # The hint names the options as the command line spells them.
+    assert "check the depth range (--min-depth-mm/--max-depth-mm)" in str(info.value)
+    assert "scattered" not in str(info.value)
     tally.add(process_frame(exact_frame, ORANGE, CONFIG), exact_frame.color)
     tally.raise_if_no_paint()
     counts = tally.to_dict()
@@ -264,3 +271,25 @@ def test_tally_counts_and_explains_paint_without_depth(exact_frame: Frame) -> No
     assert counts["paint_points"] > 0
     with pytest.raises(PerceptionError, match="no usable frames"):
         PerceptionTally(ORANGE).raise_if_no_paint()
+
+
+def test_scattered_specks_are_told_apart_from_paint_without_depth(exact_frame: Frame) -> None:
+    # Rust lifted into the orange range by camera noise: isolated pixels, no stroke. The
+    # remedy is another colour range, not another depth range.
+    color = np.full_like(exact_frame.color, 110)
+    color[::3, ::3] = PAINT_PRESETS["orange"].rgb  # no speck has a paint 4-neighbour
+    specks = replace(exact_frame, color=color)
+    clouds = process_frame(specks, ORANGE, CONFIG)
+    assert clouds.skip_reason == SKIP_SCATTERED_PAINT
+    assert clouds.paint_pixels == 40 * 54 and clouds.valid_paint_pixels == 0
+    tally = PerceptionTally(ORANGE)
+    tally.add(clouds, specks.color)
+    with pytest.raises(PerceptionError) as info:
+        tally.raise_if_no_paint()
+    message = str(info.value)
+    assert "\n" not in message
+    assert "(scattered_paint 1)" in message and "dominant hues seen: 30 deg (100%)" in message
+    assert "--min-paint-neighbors" in message and "depth range" not in message
+    # Without the neighbour test the specks are paint (with depth): the frame is used.
+    kept = process_frame(specks, ORANGE, replace(CONFIG, min_paint_neighbors=0, sor_neighbors=0))
+    assert kept.skip_reason is None and len(kept.paint_base) > 100

@@ -188,6 +188,12 @@ def test_resolve_paint_preset_custom_and_unknown() -> None:
     assert (custom.hue_min_deg, custom.hue_max_deg, custom.name) == (350.0, 10.0, "custom")
     with pytest.raises(PerceptionError, match="unknown paint preset 'teal'"):
         resolve_paint(PaintConfig(preset="teal"))
+    # From a TOML [paint] table, which the command line's --hsv parser never sees.
+    for bad in ((10.0, 40.0), (10.0, 40.0, "x", 0.3), (10.0, 40.0, 0.5, 0.3, 1.0)):
+        with pytest.raises(PerceptionError, match=r"paint\.hsv must be four numbers"):
+            resolve_paint(PaintConfig(hsv=bad))  # type: ignore[arg-type]
+    with pytest.raises(PerceptionError, match="hue_max_deg must be within 0-360"):
+        resolve_paint(PaintConfig(hsv=(10.0, 400.0, 0.5, 0.3)))
 
 
 def test_recording_paint_is_the_default_and_explicit_choices_win() -> None:

@@ -231,6 +231,13 @@ def test_bad_stitch_parameters_raise() -> None:
         stitcher(icp_min_overlap=2.0)
 
 
+def test_a_voxel_too_fine_to_index_is_a_known_error(sweep_clouds: list[FrameClouds]) -> None:
+    # 0.1 um voxels: the points, 0.5 m from the origin, are 5e6 voxels out (> 2^20).
+    s = stitcher(voxel_size_m=1e-7)
+    with pytest.raises(PerceptionError, match=r"--stitch-voxel-mm 0\.0001 is too fine"):
+        s.add(sweep_clouds[0])
+
+
 # --------------------------------------------------------------------------- the recipe
 
 

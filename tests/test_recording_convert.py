@@ -4,9 +4,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
-from helpers import SCAN_COLOR_TOPIC, SCAN_INFO_TOPIC, SyntheticScan, synthetic_scan, write_scan
+from helpers import (
+    SCAN_COLOR_TOPIC,
+    SCAN_INFO_TOPIC,
+    SyntheticScan,
+    assert_same_frames,
+    synthetic_scan,
+    write_scan,
+)
 from rosbags.highlevel import AnyReader
 
 from scrapcut_cli.errors import RecordingError
@@ -42,21 +48,6 @@ def _read(path: Path) -> tuple[list[Frame], dict[str, dict[str, str]], dict[str,
         return list(rec.frames()), rec.metadata, counts
 
 
-def _assert_same_frames(a: list[Frame], b: list[Frame]) -> None:
-    assert len(a) == len(b) > 0
-    for x, y in zip(a, b, strict=True):
-        assert (x.index, x.stamp_ns, x.camera, x.base_frame, x.camera_frame) == (
-            y.index,
-            y.stamp_ns,
-            y.camera,
-            y.base_frame,
-            y.camera_frame,
-        )
-        np.testing.assert_array_equal(x.color, y.color)
-        np.testing.assert_array_equal(x.depth, y.depth)
-        np.testing.assert_allclose(x.T_base_cam, y.T_base_cam, atol=1e-12)
-
-
 @pytest.mark.parametrize("source", ["mcap", "ros1", "ros2"])
 @pytest.mark.parametrize("target", list(TARGETS))
 def test_conversion_keeps_frames_topics_and_metadata(
@@ -67,7 +58,7 @@ def test_conversion_keeps_frames_topics_and_metadata(
     convert_recording(sources[source], dst, fmt=fmt, storage=storage)
     frames, metadata, counts = _read(dst)
     src_frames, src_metadata, src_counts = _read(sources[source])
-    _assert_same_frames(src_frames, frames)
+    assert_same_frames(src_frames, frames, atol_m=1e-12)
     carrier = "/scrapcut/metadata"  # ROS 1 bags carry metadata on a topic of their own
     assert {k: v for k, v in counts.items() if k != carrier} == src_counts
     assert (carrier in counts) == (fmt == "ros1" and bool(metadata))
@@ -160,6 +151,22 @@ def test_existing_output_is_replaced(sources: dict[str, Path], tmp_path: Path) -
     convert_recording(sources["ros1"], dst)
     frames, _, _ = _read(dst)
     assert len(frames) == 3
+
+
+def test_a_directory_that_is_not_a_bag_is_never_replaced(
+    sources: dict[str, Path], tmp_path: Path
+) -> None:
+    # `-o results` names a ROS 2 bag directory; an existing folder of other files must survive.
+    folder = tmp_path / "results"
+    folder.mkdir()
+    (folder / "table1.csv").write_text("keep me")
+    with pytest.raises(RecordingError, match="is a directory that is not a ROS 2 bag"):
+        convert_recording(sources["mcap"], folder)
+    assert [p.name for p in folder.iterdir()] == ["table1.csv"]
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    convert_recording(sources["mcap"], empty)  # nothing to lose: becomes the bag
+    assert (empty / "metadata.yaml").is_file()
 
 
 def test_format_for_path() -> None:

@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -15,15 +17,17 @@ from helpers import (
     SCAN_DEPTH_TOPIC,
     SCAN_INFO_TOPIC,
     SyntheticScan,
+    assert_same_frames,
     scan_T_base_cam,
     scan_T_base_link8,
     synthetic_scan,
+    tiny_recording,
     write_scan,
 )
 
 from scrapcut_cli.config import RecordingConfig
 from scrapcut_cli.errors import RecordingError
-from scrapcut_cli.geometry import invert_transform
+from scrapcut_cli.recording import messages as m
 from scrapcut_cli.recording.frame import CameraModel, Frame
 from scrapcut_cli.recording.reader import open_recording, sha256_first_mib
 from scrapcut_cli.recording.writer import McapWriter
@@ -88,20 +92,7 @@ def test_frames_match_the_truth(recordings: dict[str, Path], scan: SyntheticScan
 def test_all_formats_read_back_to_identical_frames(recordings: dict[str, Path]) -> None:
     reference = _frames(recordings["mcap"])
     for key in ("ros1", "ros2-mcap", "ros2-sqlite3"):
-        frames = _frames(recordings[key])
-        assert len(frames) == len(reference)
-        for a, b in zip(reference, frames, strict=True):
-            assert (a.index, a.stamp_ns, a.camera, a.base_frame, a.camera_frame) == (
-                b.index,
-                b.stamp_ns,
-                b.camera,
-                b.base_frame,
-                b.camera_frame,
-            )
-            np.testing.assert_array_equal(a.color, b.color)
-            np.testing.assert_array_equal(a.depth, b.depth)
-            np.testing.assert_array_equal(a.T_base_cam, b.T_base_cam)
-            assert a.extras == b.extras
+        assert_same_frames(reference, _frames(recordings[key]))
 
 
 @pytest.mark.parametrize("key", list(FORMATS))
@@ -238,6 +229,21 @@ def test_not_a_recording(tmp_path: Path) -> None:
         open_recording(tmp_path / "folder")
 
 
+def test_bag_directory_without_metadata_points_at_its_storage_file(
+    recordings: dict[str, Path], tmp_path: Path
+) -> None:
+    # `ros2 bag record` killed hard leaves the storage file but no metadata.yaml.
+    interrupted = tmp_path / "interrupted"
+    interrupted.mkdir()
+    storage = interrupted / "interrupted_0.mcap"
+    shutil.copy(recordings["mcap"], storage)
+    advice = re.escape(f"open {storage} itself, or run `ros2 bag reindex`")
+    with pytest.raises(RecordingError, match=advice):
+        open_recording(interrupted)
+    with open_recording(storage) as rec:  # and the advice works
+        assert rec.plan().usable == 4
+
+
 def test_wrong_suffix_is_named(recordings: dict[str, Path], tmp_path: Path) -> None:
     copy = tmp_path / "scan.data"
     shutil.copy(recordings["ros1"], copy)
@@ -251,6 +257,22 @@ def test_truncated_mcap(recordings: dict[str, Path], tmp_path: Path) -> None:
     cut.write_bytes(data[: len(data) // 2])
     with pytest.raises(RecordingError, match=r"truncated .*mcap recover"):
         open_recording(cut)
+
+
+def test_truncated_bags_name_the_tool_that_repairs_them(
+    recordings: dict[str, Path], tmp_path: Path
+) -> None:
+    bag = recordings["ros1"].read_bytes()
+    (tmp_path / "cut.bag").write_bytes(bag[: len(bag) // 2])
+    with pytest.raises(RecordingError, match=r"cut.bag: .*index.*; .*`rosbag reindex`"):
+        open_recording(tmp_path / "cut.bag")
+    source = recordings["ros2-mcap"]
+    cut_dir = tmp_path / "cut_ros2"
+    shutil.copytree(source, cut_dir)
+    storage = cut_dir / f"{source.name}.mcap"
+    storage.write_bytes(storage.read_bytes()[:5000])
+    with pytest.raises(RecordingError, match=rf"MCAP file {storage} is truncated .*mcap recover"):
+        open_recording(cut_dir)
 
 
 def test_missing_topics_list_what_exists(recordings: dict[str, Path]) -> None:
@@ -292,22 +314,9 @@ def test_topic_of_the_wrong_type(recordings: dict[str, Path]) -> None:
         rec.plan()
 
 
-def _small_recording(
-    path: Path, *, image_frame: str = "cam", depth_shape: tuple[int, int] = (4, 6)
-) -> None:
-    camera = CameraModel(6, 4, 5.0, 5.0, 2.5, 1.5, frame_id=image_frame)
-    with McapWriter(path) as writer:
-        writer.write_tf(
-            0, [("base", "flange", np.eye(4)), ("flange", "cam", np.eye(4))], static=True
-        )
-        writer.write_camera_info(SCAN_INFO_TOPIC, 5, camera)
-        writer.write_image(SCAN_COLOR_TOPIC, 5, image_frame, np.zeros((4, 6, 3), np.uint8))
-        writer.write_image(SCAN_DEPTH_TOPIC, 5, image_frame, np.ones(depth_shape, np.uint16))
-
-
 def test_no_tf_path_names_both_frames_and_lists_the_existing(tmp_path: Path) -> None:
     path = tmp_path / "lost.mcap"
-    _small_recording(path, image_frame="camera_optical")
+    tiny_recording(path, image_frame="camera_optical")
     lost = r"no TF path from image frame 'camera_optical' .*TF frames: base, cam, flange"
     with open_recording(path) as rec, pytest.raises(RecordingError, match=lost):
         rec.plan()
@@ -317,9 +326,44 @@ def test_no_tf_path_names_both_frames_and_lists_the_existing(tmp_path: Path) -> 
         rec.plan()
 
 
+def test_a_topic_of_the_wrong_kind_fails_before_frames_are_counted(tmp_path: Path) -> None:
+    camera = CameraModel(6, 4, 5.0, 5.0, 2.5, 1.5, frame_id="cam")
+    path = tmp_path / "kinds.mcap"
+    with McapWriter(path) as writer:
+        writer.write_tf(0, [("base", "cam", np.eye(4))], static=True)
+        writer.write_camera_info("/info", 5, camera)
+        uncalibrated = m.camera_info_msg(5, camera)
+        uncalibrated.k = np.zeros(9)  # what a camera without intrinsics publishes
+        writer.write_message("/uncalibrated", m.CAMERA_INFO, uncalibrated, log_time_ns=5)
+        for topic in ("/rgb", "/ir_rgb"):
+            writer.write_image(topic, 5, "cam", np.zeros((4, 6, 3), np.uint8))
+        writer.write_image("/depth", 5, "cam", np.ones((4, 6), np.uint16))
+        writer.write_compressed_image("/depth/jpeg", 5, "cam", np.zeros((4, 6, 3), np.uint8))
+    good = RecordingConfig(color_topic="/rgb", depth_topic="/depth", info_topic="/info")
+    with open_recording(path, good) as rec:
+        assert rec.plan().usable == 1
+    for depth_topic, why in (
+        ("/ir_rgb", "unsupported depth encoding 'rgb8'"),
+        ("/depth/jpeg", "unsupported compressed depth format"),
+    ):
+        config = replace(good, depth_topic=depth_topic)
+        wrong = rf"^{depth_topic}: {why}.*; pick another with --depth-topic$"
+        with open_recording(path, config) as rec, pytest.raises(RecordingError, match=wrong):
+            rec.plan()
+    config = replace(good, color_topic="/depth", depth_topic="/rgb")
+    with open_recording(path, config) as rec, pytest.raises(RecordingError, match="--color-topic"):
+        rec.plan()
+    zero_k = r"focal lengths must be positive.*CameraInfo on /uncalibrated; pick another"
+    with (
+        open_recording(path, replace(good, info_topic="/uncalibrated")) as rec,
+        pytest.raises(RecordingError, match=zero_k),
+    ):
+        rec.plan()
+
+
 def test_color_depth_size_mismatch(tmp_path: Path) -> None:
     path = tmp_path / "mismatch.mcap"
-    _small_recording(path, depth_shape=(3, 6))
+    tiny_recording(path, depth_shape=(3, 6))
     with (
         open_recording(path) as rec,
         pytest.raises(
@@ -349,5 +393,3 @@ def test_reference_in_another_frame_is_moved_to_the_base(tmp_path: Path) -> None
         assert rec.exploration_log() == []
     with open_recording(path, RecordingConfig(base_frame="table")) as rec:
         np.testing.assert_allclose(rec.reference(), [[0, 0, 0], [0.1, 0, 0]])
-    inverse = invert_transform(T)
-    assert np.allclose(inverse @ T, np.eye(4))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from scrapcut_cli.errors import SimError
 from scrapcut_cli.geometry import look_at, rotation_angle, transform_points
 from scrapcut_cli.sim import make_object
 from scrapcut_cli.sim.camera import (
@@ -147,6 +148,6 @@ def test_camera_model_and_mount() -> None:
     assert np.allclose(T_hand_opt[:3, 2], (0.0, 0.0, 1.0))
     assert np.allclose(np.linalg.det(T_hand_opt[:3, :3]), 1.0)
     assert np.allclose(transform_points(T_CAMLINK_OPTICAL, [[0.0, 0.0, 1.0]]), [[1.0, 0.015, 0.0]])
-    with pytest.raises(Exception, match="unknown noise preset"):
+    with pytest.raises(SimError, match="unknown noise preset"):
         noise_preset("foggy")
     assert OVERSPRAY_PRESETS[D435I.overspray].density > 0

@@ -12,6 +12,7 @@ from scrapcut_cli.errors import SimError
 from scrapcut_cli.geometry import cumulative_length
 from scrapcut_cli.sim import list_objects, make_object
 from scrapcut_cli.sim.mesh import TriMesh, box
+from scrapcut_cli.sim.surface import metal_albedo
 
 NAMES = ("cylinder", "i_beam", "t_piece", "basket", "air_chamber", "slanted", "planar_box")
 
@@ -118,7 +119,15 @@ def test_t_piece_line_runs_from_the_branch_over_the_main_pipe() -> None:
 def test_seed_changes_the_rust_not_the_geometry() -> None:
     a, b = make_object("t_piece", seed=0), make_object("t_piece", seed=5)
     assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.reference, b.reference)
-    assert a.seed != b.seed
+    points = np.random.default_rng(0).uniform(
+        a.vertices.min(axis=0), a.vertices.max(axis=0), (20000, 3)
+    )
+    rust_a = metal_albedo(points, a.material, a.seed)[1]
+    rust_b = metal_albedo(points, b.material, b.seed)[1]
+    assert np.array_equal(rust_a, metal_albedo(points, a.material, 0)[1])  # seeded
+    # Same share of rust (the material's), in other places.
+    assert rust_a.mean() == pytest.approx(rust_b.mean(), abs=0.1)
+    assert np.mean(rust_a != rust_b) > 0.2
 
 
 def test_placement_moves_piece_and_reference_rigidly() -> None:

@@ -91,3 +91,14 @@ def test_thin_cloud_keeps_one_point_per_voxel_in_order() -> None:
     assert len({tuple(k) for k in keys}) == 27
     index = [int(np.flatnonzero((cloud == p).all(axis=1))[0]) for p in thin]
     assert index == sorted(index)
+
+
+def test_a_needle_thin_torch_still_works() -> None:
+    # A torch radius far below the cloud's spacing (a typo in --torch-radius-mm): no crash
+    # from the thinning grid, and a needle beside the wall is free.
+    points, normals, tangents, cloud = _path_beside_wall(0.010)
+    result = choose_torch_axes(
+        points, normals, tangents, cloud,
+        standoff_m=STANDOFF, length_m=LENGTH, radius_m=1e-7, max_tilt_deg=20.0,
+    )  # fmt: skip
+    assert not result.tilted.any() and not result.colliding.any()

@@ -92,6 +92,21 @@ def test_points_without_surface_are_reported_and_filled() -> None:
     np.testing.assert_array_equal(filled[est.supported], est.normals[est.supported])
 
 
+def test_gap_between_opposite_normals_takes_the_nearer_side() -> None:
+    # Interpolation across a gap between opposite normals (a thin plate seen from both sides)
+    # cancels out in the gap's middle; those rows take the nearer supported neighbour's normal.
+    arc = np.linspace(0.0, 0.14, 15)
+    normals = np.zeros((15, 3))
+    normals[:3] = [0.0, 0.0, 1.0]
+    normals[10:] = [0.0, 0.0, -1.0]
+    supported = np.ones(15, dtype=bool)
+    supported[3:10] = False  # rows 5-7 interpolate to less than half a unit vector
+    filled = fill_unsupported(arc, normals, supported)
+    np.testing.assert_array_equal(filled[:6], np.tile([0.0, 0.0, 1.0], (6, 1)))
+    np.testing.assert_array_equal(filled[7:], np.tile([0.0, 0.0, -1.0], (8, 1)))
+    np.testing.assert_allclose(np.abs(filled[6, 2]), 1.0)  # the middle: a tie, either side
+
+
 def test_smoothing_reduces_noise_without_bias_on_a_turning_surface() -> None:
     rng = np.random.default_rng(7)
     curve, truth = arc_on_cylinder(radius=0.06, angle=np.pi, n=121)

@@ -192,6 +192,9 @@ def test_errors_name_the_problem() -> None:
         make_cutting_path(Curve(curve_points[:1], "t"), surface, viewpoints, config=CONFIG)
     with pytest.raises(ToolpathError, match="spacing_m must be positive"):
         make_cutting_path(curve, surface, viewpoints, config=ToolpathConfig(spacing_m=0.0))
+    # A tip on the surface puts the surface inside the torch body: refused, not all flagged.
+    with pytest.raises(ToolpathError, match="standoff_m must be positive"):
+        make_cutting_path(curve, surface, viewpoints, config=ToolpathConfig(standoff_m=0.0))
     with pytest.raises(ToolpathError, match="NaN"):
         make_cutting_path(curve, surface * np.nan, viewpoints, config=CONFIG)
 

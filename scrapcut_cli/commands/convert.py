@@ -42,4 +42,4 @@ def convert(recording: Path, output: Path, fmt: str | None, storage: str) -> Non
 
     fmt = fmt or format_for_path(output)
     convert_recording(recording, output, fmt=fmt, storage=storage)
-    err.print(f"wrote {output} ({fmt})", soft_wrap=True)
+    err.print(f"wrote {output} ({fmt})", soft_wrap=True, markup=False)

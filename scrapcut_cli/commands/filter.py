@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import re
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -69,6 +70,38 @@ class _PlySink:
             write_cloud(self.directory / name, clouds.surface_base)
 
 
+#: The files a PLY folder written by ``scrapcut filter`` holds; only such a folder is replaced.
+_PLY_NAME = re.compile(r"(paint|surface)_\d{6}\.ply")
+
+
+def _check_output(output: Path, recording: Path) -> None:
+    """A usage error unless ``-o`` names an .mcap file or a folder that may be (re)placed.
+
+    A PLY folder replaces an existing one as a whole, so an existing folder must hold only what
+    an earlier ``scrapcut filter`` wrote there: ``-o .`` or ``-o ~/data`` is refused, never wiped.
+    """
+    if output.suffix and output.suffix.lower() != ".mcap":
+        raise click.BadParameter(
+            f"{output}: give a .mcap file or a folder name (no suffix)", param_hint="-o"
+        )
+    if output.exists() and output.resolve() == recording.resolve():
+        raise click.BadParameter(f"{output} is the recording itself", param_hint="-o")
+    if output.suffix or not output.exists():
+        return
+    if not output.is_dir():
+        raise click.BadParameter(f"{output} exists and is not a folder", param_hint="-o")
+    target = output.resolve()
+    if target == Path.cwd().resolve() or target in Path.cwd().resolve().parents:
+        raise click.BadParameter(f"{output} holds the current folder", param_hint="-o")
+    foreign = sorted(p.name for p in output.iterdir() if not _PLY_NAME.fullmatch(p.name))
+    if foreign:
+        raise click.BadParameter(
+            f"{output} holds files scrapcut filter did not write (e.g. {foreign[0]}) and would "
+            "be replaced as a whole; give a new folder",
+            param_hint="-o",
+        )
+
+
 @contextlib.contextmanager
 def _sink(
     output: Path | None,
@@ -102,8 +135,9 @@ def _sink(
     "--output",
     type=click.Path(path_type=Path),
     default=None,
-    help="PAINT.mcap (PointCloud2 on /scrapcut/paint, base frame) or a folder of PLY files; "
-    "without it only the summary is printed.",
+    help="PAINT.mcap (PointCloud2 on /scrapcut/paint, base frame) or a folder of PLY files "
+    "(replaced whole, so an existing one may hold only an earlier run's PLYs); without it "
+    "only the summary is printed.",
 )
 @click.option(
     "--surface",
@@ -135,10 +169,8 @@ def filter_cmd(
     from scrapcut_cli.perception.paint import PAINT_PRESETS, resolve_recording_paint
     from scrapcut_cli.recording.reader import open_recording
 
-    if output is not None and output.suffix and output.suffix.lower() != ".mcap":
-        raise click.BadParameter(
-            f"{output}: give a .mcap file or a folder name (no suffix)", param_hint="-o"
-        )
+    if output is not None:
+        _check_output(output, recording)
     stage, shared = split_stage_options(options)
     config = apply_stage_options(build_config(config_path, **shared), stage)
 

@@ -84,7 +84,7 @@ def _mm(value: float | None) -> float | None:
 )
 @click.option(
     "--standoff-mm",
-    type=click.FloatRange(min=0.0),
+    type=click.FloatRange(min=0.0, min_open=True),
     default=None,
     help="Torch tip distance from the surface [mm] (default 8).",
 )

@@ -34,7 +34,8 @@ def info(
 
     Shows every topic with its type and count, the camera intrinsics, how many colour frames
     pair with depth and have a pose (and why the others do not), the base and camera frames,
-    and whether a reference curve and an exploration log are present. Reads headers only.
+    and whether a reference curve and an exploration log are present. Reads headers (and
+    decodes one colour and one depth image as a check).
     """
     from scrapcut_cli.recording.summary import summarize_recording
 
@@ -55,10 +56,11 @@ def info(
 
 def render(summary: RecordingSummary) -> None:
     """Rich tables on stdout."""
+    from rich.markup import escape
     from rich.table import Table
 
     cam, plan = summary.camera, summary.plan
-    overview = Table(title=str(summary.path), show_header=False, title_justify="left")
+    overview = Table(title=escape(str(summary.path)), show_header=False, title_justify="left")
     overview.add_column(style="bold")
     overview.add_column()
     overview.add_row("format", summary.format)
@@ -84,7 +86,10 @@ def render(summary: RecordingSummary) -> None:
     overview.add_row("reference", "yes" if summary.has_reference else "no")
     overview.add_row("exploration log", "yes" if summary.has_exploration_log else "no")
     for name, data in sorted(summary.metadata.items()):
-        overview.add_row(f"metadata {name}", ", ".join(f"{k}={v}" for k, v in data.items()))
+        overview.add_row(
+            escape(f"metadata {name}"),
+            escape("\n".join(f"{k}={_short(v)}" for k, v in data.items())),
+        )
     print_table(overview)
 
     topics = Table(title="topics", title_justify="left")
@@ -94,3 +99,11 @@ def render(summary: RecordingSummary) -> None:
     for topic in summary.topics:
         topics.add_row(topic.name, topic.msgtype, str(topic.count))
     print_table(topics)
+
+
+def _short(value: str, limit: int = 60) -> str:
+    """A metadata value for the table: long ones (the simulator's JSON of every parameter, a
+    few kB) would stretch it to a thousand columns; ``--json`` prints them whole."""
+    if len(value) <= limit:
+        return value
+    return f"({len(value)} characters; --json shows it)"

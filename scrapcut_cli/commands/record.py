@@ -132,6 +132,13 @@ def record(
         return
     if output is None:
         raise click.UsageError("missing -o/--output (the MCAP file to write)")
+    if output.suffix != ".mcap":
+        # Readers tell the format by name too: an MCAP called scan.bag would not open.
+        raise click.BadParameter(
+            f"the simulator writes MCAP; name the file *.mcap, not {output.name!r} "
+            "(`scrapcut convert` then makes a ROS 1 or ROS 2 bag)",
+            param_hint="-o/--output",
+        )
 
     config = build_config(config_path, paint=paint, hsv=hsv)
     config = config.override("exploration", method=method)
@@ -157,6 +164,7 @@ def record(
         f"recording {sim.object} ({sim.mode}, {sim.noise} noise, {sim.paint} paint, "
         f"{sim.width}×{sim.height} px, seed {sim.seed}) → {output}",
         soft_wrap=True,
+        markup=False,
     )
     factory = None
     if sim.mode == "explore":

@@ -101,6 +101,7 @@ def stitch(
     size(k) - size(k-1)) are printed; --json adds them frame by frame.
     """
     from scrapcut_cli.commands._console import err, out, progress
+    from scrapcut_cli.errors import PerceptionError
     from scrapcut_cli.perception.paint import resolve_recording_paint
     from scrapcut_cli.perception.stitch import stitch_recording
     from scrapcut_cli.recording.reader import open_recording
@@ -122,6 +123,12 @@ def stitch(
                 bar.update(task, advance=1, status=f"{step.size} voxels")
 
             result = stitch_recording(rec.frames(), hsv, config, progress=advance)
+    if surface_path is not None and len(result.surface_points) == 0:
+        # Checked before anything is written: both clouds or neither.
+        raise PerceptionError(
+            f"no surface points to write to {surface_path} (surface band "
+            f"{1000 * config.perception.surface_band_m:g} mm; see --surface-band-mm)"
+        )
     write_cloud(output, result.paint_points)
     if surface_path is not None:
         write_cloud(surface_path, result.surface_points)

@@ -125,14 +125,10 @@ def path_error(
         the configuration is not positive.
     """
     config = EvaluationConfig() if config is None else config
-    if not config.sample_spacing_m > 0:
-        raise EvaluationError(
-            f"evaluation.sample_spacing_m must be positive, got {config.sample_spacing_m}"
-        )
-    if not config.coverage_threshold_m > 0:
-        raise EvaluationError(
-            f"evaluation.coverage_threshold_m must be positive, got {config.coverage_threshold_m}"
-        )
+    for name in ("sample_spacing_m", "coverage_threshold_m"):
+        value = getattr(config, name)
+        if not (np.isfinite(value) and value > 0):
+            raise EvaluationError(f"evaluation.{name} must be a finite number > 0, got {value}")
     curve = _polyline(curve_points, "fitted curve")
     ref = _polyline(reference, "reference")
 

@@ -9,11 +9,12 @@ gets its own scan, since the planner's views follow that method's fits (the pape
 method separately). Objects run in parallel processes (``jobs``); progress comes back through
 one queue to one callback.
 
-The skeleton uses the configured leaf size (the paper's 5 mm); when it breaks into pieces it is
-retried once at ``retry_leaf_size_m`` (20 mm, what the paper did for the basket) and the row
-says so. A failure of one object or method is a row in the table, not an abort. With
-``leaf_sweep_m`` the skeleton is also fitted at each of those leaf sizes on the same stitched
-cloud (no retry): the rows of the paper's Fig. 3, kept apart from Table I.
+The skeleton uses the configured leaf size (the paper's 5 mm); when that fit fails (the usual
+reason: it breaks into pieces) it is retried once at ``retry_leaf_size_m`` (20 mm, what the
+paper did for the basket) and the row says so. A failure of one object or method is a row in
+the table, not an abort. With ``leaf_sweep_m`` the skeleton is also fitted at each of those
+leaf sizes on the same stitched cloud (no retry): the rows of the paper's Fig. 3, kept apart
+from Table I.
 
 The output folder is built under a temporary name and renamed at the end::
 
@@ -170,13 +171,13 @@ def reproduce(
     methods = resolve_methods(methods)
     if jobs < 1:
         raise EvaluationError(f"jobs must be at least 1, got {jobs}")
-    if not retry_leaf_size_m > 0:
+    if not (np.isfinite(retry_leaf_size_m) and retry_leaf_size_m > 0):
         raise EvaluationError(f"the retry leaf size must be positive, got {retry_leaf_size_m}")
     sweep = tuple(sorted({float(leaf) for leaf in leaf_sweep_m}))
-    if any(not leaf > 0 for leaf in sweep):
+    if not all(np.isfinite(leaf) and leaf > 0 for leaf in sweep):
         raise EvaluationError(f"leaf sizes must be positive, got {list(leaf_sweep_m)}")
     _check_mode(config.sim.mode)
-    _check_out_dir(out_dir)
+    check_out_dir(out_dir)
     report = progress or _no_progress
 
     with atomic_path(out_dir, directory=True) as tmp:
@@ -414,17 +415,17 @@ def _fit_and_evaluate(
                 f"{leaf * 1000:g} mm leaf broke ({why}); retried at {retry_leaf_size_m * 1000:g} mm"
             )
             result = fit_stitched(stitched, method=method, config=config)
+        path_file = out_dir / "paths" / f"{path_stem or f'{name}_{method}'}.json"
+        write_path_file(path_file, result.to_path_dict())
+        row = evaluate_path_file(
+            load_path_file(path_file),
+            reference,
+            config=config.evaluation,
+            object_name=name,
+            note=note,
+        )
     except ScrapcutError as exc:
         return ReportRow(name, method, None, params=params, note=note, failure=str(exc))
-    path_file = out_dir / "paths" / f"{path_stem or f'{name}_{method}'}.json"
-    write_path_file(path_file, result.to_path_dict())
-    row = evaluate_path_file(
-        load_path_file(path_file),
-        reference,
-        config=config.evaluation,
-        object_name=name,
-        note=note,
-    )
     # Rows name their path file relative to the output folder, which is renamed at the end.
     return replace(row, source=str(Path("paths") / path_file.name))
 
@@ -501,7 +502,7 @@ def _check_mode(mode: str) -> None:
         raise EvaluationError(f"unknown mode {mode!r}; reproduce runs {', '.join(MODES)}")
 
 
-def _check_out_dir(out_dir: Path) -> None:
+def check_out_dir(out_dir: Path) -> None:
     """Refuse to replace a folder that is not an earlier reproduce output."""
     if not out_dir.exists():
         return

@@ -7,6 +7,7 @@ CSV with the header ``x,y,z`` (metres, base frame, ordered along the curve).
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -82,9 +83,13 @@ def read_reference_csv(path: str | Path) -> NDArray[np.float64]:
     """(M, 3) reference points from a CSV with header ``x,y,z`` (metres, base frame)."""
     path = Path(path)
     try:
-        with path.open(encoding="utf-8") as f:
+        # utf-8-sig: a spreadsheet's export starts with a byte-order mark.
+        with path.open(encoding="utf-8-sig") as f:
             header = [h.strip().lower() for h in f.readline().split(",")]
-            rows = np.loadtxt(f, delimiter=",", dtype=np.float64, ndmin=2)
+            with warnings.catch_warnings():
+                # A header without rows is reported below (one line), not warned about.
+                warnings.simplefilter("ignore", UserWarning)
+                rows = np.loadtxt(f, delimiter=",", dtype=np.float64, ndmin=2)
     except FileNotFoundError:
         raise EvaluationError(f"reference not found: {path}") from None
     except (OSError, UnicodeDecodeError, ValueError) as exc:
@@ -93,6 +98,12 @@ def read_reference_csv(path: str | Path) -> NDArray[np.float64]:
         raise EvaluationError(f"reference CSV {path} must start with the header x,y,z (metres)")
     if rows.shape[0] < 2 or rows.shape[1] < 3:
         raise EvaluationError(f"reference CSV {path} needs at least two rows of x,y,z")
+    bad = np.flatnonzero(~np.isfinite(rows[:, :3]).all(axis=1))
+    if len(bad):
+        raise EvaluationError(
+            f"reference CSV {path}: {len(bad)} row(s) with NaN or infinite coordinates "
+            f"(first: line {int(bad[0]) + 2})"
+        )
     return np.ascontiguousarray(rows[:, :3])
 
 

@@ -32,9 +32,11 @@ class Decision:
     """What the planner wants next.
 
     ``T_base_cam`` is the next camera pose (optical frame, base frame) unless ``stop`` is set;
-    ``reason`` is a short machine-friendly word (``extrapolate``, ``endpoint``, ``return``,
-    ``done``, ``budget``, ``no_feasible_view``, ``paint_lost``...); ``info`` carries the
-    step's log entry (written as JSON on /scrapcut/exploration).
+    ``reason`` is a short machine-friendly word: why this view (``initial``, ``extrapolate``,
+    ``look_past``), why a direction ended (``endpoint``, ``revisit``, ``no_feasible_view``,
+    ``paint_lost``, ``fit_failed``: on the return to the initial view, whose ``info["action"]``
+    is ``return``, or on the stop) or why the run stopped (``done``, ``budget``); ``info``
+    carries the step's log entry (written as JSON on /scrapcut/exploration).
     """
 
     T_base_cam: NDArray[np.float64] | None

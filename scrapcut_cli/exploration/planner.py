@@ -191,7 +191,10 @@ def pose_from_dict(data: Any) -> FloatArray:
         quat = np.asarray(data["orientation_xyzw"], dtype=np.float64).reshape(4)
     except (KeyError, TypeError, ValueError):
         raise ExplorationError(f"malformed pose in the exploration log: {data!r:.80}") from None
-    return transform_from_pose(position, quat / np.linalg.norm(quat))
+    norm = float(np.linalg.norm(quat))
+    if not (np.isfinite(position).all() and np.isfinite(norm) and norm > 1e-9):
+        raise ExplorationError(f"malformed pose in the exploration log: {data!r:.80}")
+    return transform_from_pose(position, quat / norm)
 
 
 def check_exploration_config(config: ScrapcutConfig) -> None:
@@ -214,8 +217,8 @@ def check_exploration_config(config: ScrapcutConfig) -> None:
         "edge_probe_m": c.edge_probe_m,
     }
     for name, value in positive.items():
-        if not value > 0:
-            raise ExplorationError(f"exploration.{name} must be positive, got {value}")
+        if not (np.isfinite(value) and value > 0):
+            raise ExplorationError(f"exploration.{name} must be a finite number > 0, got {value}")
     non_negative = {
         "delta_size": c.delta_size,
         "fit_margin_m": c.fit_margin_m,
@@ -226,8 +229,8 @@ def check_exploration_config(config: ScrapcutConfig) -> None:
         "body_radius_m": c.body_radius_m,
     }
     for name, value in non_negative.items():
-        if value < 0:
-            raise ExplorationError(f"exploration.{name} must be >= 0, got {value}")
+        if not (np.isfinite(value) and value >= 0):
+            raise ExplorationError(f"exploration.{name} must be a finite number >= 0, got {value}")
     if c.max_distance_m < c.min_distance_m:
         raise ExplorationError(
             f"exploration.max_distance_m ({c.max_distance_m}) is below min_distance_m "

@@ -44,6 +44,7 @@ from scrapcut_cli.exploration.planner import (
     ExplorationPlanner,
     Observation,
     StepTiming,
+    check_exploration_config,
     perceive,
     pose_from_dict,
 )
@@ -222,7 +223,8 @@ class ExplorationRun:
         return not self.divergences
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary and steps (lengths in mm, as in reports)."""
+        """JSON-ready summary and steps (travel, curve length and errors in mm, as in reports;
+        the ``ends`` tips and the poses in metres, as in the log)."""
         timings = np.array([[t.planner, t.total] for t in self.timings]) if self.timings else None
         return {
             "mode": self.mode,
@@ -559,12 +561,14 @@ def what_if(
     Raises
     ------
     ExplorationError
-        No usable frames, no paint in any, or ``start_frame`` out of range.
+        A planner parameter out of range (before any frame is read), no usable frames, no
+        paint in any, or ``start_frame`` out of range.
     """
     from scrapcut_cli.perception.paint import resolve_recording_paint
     from scrapcut_cli.recording.reader import open_recording
 
     path = Path(recording)
+    check_exploration_config(config)  # before minutes of perceiving every frame
     library: list[Observation] = []
     with open_recording(path, config.recording) as rec:
         hsv = resolve_recording_paint(config.paint, rec.metadata)

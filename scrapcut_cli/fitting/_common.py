@@ -18,7 +18,6 @@ from scipy.spatial import cKDTree
 
 from scrapcut_cli.errors import FittingError
 from scrapcut_cli.geometry import (
-    PolylineDistance,
     cumulative_length,
     interpolate_polyline,
     resample_polyline,
@@ -42,6 +41,22 @@ def as_points(points_base: ArrayLike, *, minimum: int, what: str) -> FloatArray:
     if float(np.ptp(pts, axis=0).max()) <= 1e-9:
         raise FittingError(f"{what}: all {len(pts)} points coincide; nothing to fit")
     return pts
+
+
+def check_numbers(
+    config: object,
+    where: str,
+    *,
+    positive: tuple[str, ...] = (),
+    non_negative: tuple[str, ...] = (),
+) -> None:
+    """One-line FittingError naming the first option of config section ``where`` that is not a
+    finite number > 0 (``positive``) or >= 0 (``non_negative``): NaN and infinity included."""
+    for names, above, words in ((positive, False, "> 0"), (non_negative, True, ">= 0")):
+        for name in names:
+            value = getattr(config, name)
+            if not (np.isfinite(value) and (value >= 0.0 if above else value > 0.0)):
+                raise FittingError(f"{where}.{name} must be a finite number {words}, got {value}")
 
 
 @dataclass(frozen=True)
@@ -132,10 +147,11 @@ def band_fill(polyline: FloatArray, points: FloatArray, *, cell_m: float = 0.004
     by that much (round caps). A sprayed stroke fills it (about 0.9-1.0); paint that landed
     only on the wires of a mesh fills a fifth of it. A line thinner than a cell counts as full.
     """
-    distance, _, u = PolylineDistance(polyline).query(points)
-    vertex_s = cumulative_length(polyline)
-    i = np.clip(np.floor(u).astype(np.int64), 0, len(polyline) - 2)
-    s = vertex_s[i] + (u - i) * (vertex_s[i + 1] - vertex_s[i])
+    # Nearest vertex of the curve resampled every half millimetre: arc length within 0.25 mm
+    # and distance within far less, at a tenth of the cost of exact point-to-segment queries.
+    dense = resample_polyline(polyline, 0.0005)
+    distance, nearest = cKDTree(dense).query(points)
+    s = cumulative_length(dense)[nearest]
     half = float(np.quantile(distance, 0.9))
     if half < cell_m:
         return 1.0

@@ -66,6 +66,11 @@ class NurbsModel:
         )
 
 
+#: ``Curve.info`` entries listed from the curve's start to its end (skeleton vertices, the
+#: per-end trims and shapes): :meth:`Curve.reversed` reverses them.
+ORDERED_INFO = ("skeleton_points", "end_trim_m", "end_shape")
+
+
 @dataclass(frozen=True, eq=False)
 class Curve:
     """An ordered polyline (N, 3) in the base frame plus the fitting method's own model.
@@ -90,7 +95,8 @@ class Curve:
         return resample_polyline(self.points, spacing)
 
     def reversed(self) -> Curve:
-        """The same curve traversed the other way."""
+        """The same curve traversed the other way: the model, and the ``info`` entries listed
+        from the start to the end (:data:`ORDERED_INFO`, the per-end trims) turn with it."""
         nurbs = None
         if self.nurbs is not None:
             n = self.nurbs
@@ -101,10 +107,19 @@ class Curve:
                 control_points=n.control_points[::-1].copy(),
                 weights=n.weights[::-1].copy(),
             )
+        info = dict(self.info)
+        for key in ORDERED_INFO:
+            if isinstance(info.get(key), list | tuple):
+                info[key] = list(info[key])[::-1]
+        if "end_trim_start_m" in info and "end_trim_end_m" in info:
+            info["end_trim_start_m"], info["end_trim_end_m"] = (
+                info["end_trim_end_m"],
+                info["end_trim_start_m"],
+            )
         return Curve(
             points=self.points[::-1].copy(),
             method=self.method,
             nurbs=nurbs,
             spacing_m=self.spacing_m,
-            info=dict(self.info),
+            info=info,
         )

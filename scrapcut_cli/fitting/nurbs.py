@@ -68,6 +68,7 @@ from scrapcut_cli.fitting._common import (
     as_points,
     band_fill,
     canonical_order,
+    check_numbers,
     corner_indices,
     follows_input_order,
 )
@@ -228,7 +229,7 @@ def fit_nurbs(points_base: ArrayLike, *, config: NurbsConfig | None = None) -> C
             "points": len(pts),
             "smoothness": float(config.smoothness),
             "smoothing_length_m": float(ell),
-            **ends.info(mode=config.end_trim, forward=forward),
+            **ends.info(mode=config.end_trim),  # start to end: curve.reversed() turns them
         },
     )
     return curve if forward else curve.reversed()
@@ -280,12 +281,18 @@ def _check_config(config: NurbsConfig) -> None:
         )
     if config.init not in INITS:
         raise FittingError(f"unknown NURBS init {config.init!r}; known: {', '.join(INITS)}")
-    for name in ("smoothness", "smoothing_length_m"):
-        if getattr(config, name) < 0:
-            raise FittingError(f"nurbs.{name} must not be negative, got {getattr(config, name)}")
-    for name in ("control_point_spacing_m", "sample_spacing_m", "min_knot_spacing_m"):
-        if getattr(config, name) <= 0:
-            raise FittingError(f"nurbs.{name} must be positive, got {getattr(config, name)}")
+    check_numbers(
+        config,
+        "nurbs",
+        positive=("control_point_spacing_m", "sample_spacing_m", "min_knot_spacing_m"),
+        non_negative=(
+            "smoothness",
+            "smoothing_length_m",
+            "tolerance_m",
+            "refine_bias_m",
+            "corner_angle_deg",
+        ),
+    )
     if not 0.0 <= config.end_quantile < 0.5:
         raise FittingError(f"nurbs.end_quantile must be in [0, 0.5), got {config.end_quantile}")
     check_end_trim(config.end_trim, config.end_trim_m, "nurbs")
@@ -398,7 +405,9 @@ def _evaluate(
     weights = mass * _huber_weights(dist) if config.robust else mass
     data = float(np.sum(weights * dist**2) / np.sum(weights))
     lam = _penalty_weight(config, length)
-    penalty = float(lam * np.sum(_smoothing_cached(knots.tobytes(), degree) @ ctrl * ctrl))
+    # Pᵀ R P >= 0 (R is positive semi-definite); round-off can make it -1e-20 on exact data.
+    bending = float(np.sum(_smoothing_cached(knots.tobytes(), degree) @ ctrl * ctrl))
+    penalty = lam * max(bending, 0.0)
     return _Fit(
         knots, ctrl, degree, t, residuals, weights, mass, data + penalty, length, iterations
     )

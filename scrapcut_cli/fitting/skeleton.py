@@ -46,6 +46,7 @@ from scrapcut_cli.fitting._common import (
     CanonicalFrame,
     arc_positions,
     as_points,
+    check_numbers,
     clip_to_extent,
     corner_indices,
     data_extent,
@@ -159,6 +160,11 @@ def fit_skeleton(points_base: ArrayLike, *, config: SkeletonConfig | None = None
         margin=max(int(np.ceil(config.block_margin_m / leaf)), 2),
     )
     order, pruned = _longest_path(thinning.skeleton, prune_length=config.prune_length_m / leaf)
+    if len(order) < 2:
+        raise FittingError(
+            f"skeleton fit: the paint thins to a single {leaf * 1e3:g} mm voxel; "
+            "try a smaller --leaf-size"
+        )
     path = thinning.skeleton[order].astype(np.float64) * leaf
     paint = x[inside]
 
@@ -231,13 +237,14 @@ def fit_skeleton(points_base: ArrayLike, *, config: SkeletonConfig | None = None
 
 
 def _check_config(config: SkeletonConfig) -> None:
-    for name in ("leaf_size_m", "sample_spacing_m", "refine_radius_m"):
-        if getattr(config, name) <= 0:
-            raise FittingError(f"skeleton.{name} must be positive, got {getattr(config, name)}")
-    if config.refine_window_m is not None and config.refine_window_m <= 0:
-        raise FittingError(
-            f"skeleton.refine_window_m must be positive, got {config.refine_window_m}"
-        )
+    check_numbers(
+        config,
+        "skeleton",
+        positive=("leaf_size_m", "sample_spacing_m", "refine_radius_m"),
+        non_negative=("prune_length_m", "block_margin_m", "corner_angle_deg", "min_piece_share"),
+    )
+    if config.refine_window_m is not None:
+        check_numbers(config, "skeleton", positive=("refine_window_m",))
     if config.closing_voxels < 0:
         raise FittingError(f"skeleton.closing_voxels must be >= 0, got {config.closing_voxels}")
     if config.max_block_voxels < 1000:

@@ -43,6 +43,8 @@ FloatArray = NDArray[np.float64]
 
 #: Why a frame contributed no paint points.
 SKIP_NO_PAINT = "no_paint"
+#: Pixels in the colour range, but only isolated ones (camera noise on rust, specks): no stroke.
+SKIP_SCATTERED_PAINT = "scattered_paint"
 SKIP_NO_VALID_DEPTH = "no_valid_depth"
 SKIP_TOO_LITTLE_PAINT = "too_little_paint"
 
@@ -66,7 +68,8 @@ class FrameClouds:
     T_base_cam : (4, 4) float64
         The camera pose the points were projected with.
     skip_reason : str or None
-        ``no_paint``, ``no_valid_depth`` or ``too_little_paint`` when ``paint_base`` is empty.
+        ``no_paint``, ``scattered_paint``, ``no_valid_depth`` or ``too_little_paint`` when
+        ``paint_base`` is empty.
     """
 
     frame_index: int
@@ -345,7 +348,14 @@ def process_frame(frame: Frame, hsv: HsvRange, config: PerceptionConfig) -> Fram
     if paint_pixels == 0:
         return skipped(SKIP_NO_PAINT, 0, 0)
     if len(points) == 0:
-        return skipped(SKIP_NO_VALID_DEPTH, paint_pixels, 0)
+        # Scattered specks (rust lifted into the range by noise) and paint without usable depth
+        # need different remedies; telling them apart costs a second filter on skipped frames only.
+        solid = reject_isolated_pixels(
+            paint_pixel_indices(frame.color, hsv),
+            frame.depth.shape,
+            min_neighbors=config.min_paint_neighbors,
+        )
+        return skipped(SKIP_NO_VALID_DEPTH if solid.size else SKIP_SCATTERED_PAINT, paint_pixels, 0)
     paint = remove_statistical_outliers(
         voxel_downsample(points, config.voxel_size_m),
         neighbors=config.sor_neighbors,
@@ -391,8 +401,12 @@ class PerceptionTally:
             self.frames_with_paint += 1
         else:
             self.skip_reasons[clouds.skip_reason] += 1
-        if clouds.paint_pixels == 0 and color is not None and self.paint_pixels == 0:
-            # Only needed while no paint at all has been seen; costs ~1 ms a frame then.
+        if (
+            color is not None
+            and self.frames_with_paint == 0
+            and clouds.skip_reason in (SKIP_NO_PAINT, SKIP_SCATTERED_PAINT)
+        ):
+            # Only needed while no usable paint has been seen; costs ~1 ms a frame then.
             self.hues.add(color)
 
     def raise_if_no_paint(self) -> None:
@@ -401,16 +415,26 @@ class PerceptionTally:
             raise PerceptionError("the recording has no usable frames to look for paint in")
         if self.frames_with_paint > 0:
             return
+        hues = f"dominant hues seen: {self.hues.describe()}"
         if self.paint_pixels == 0:
             raise PerceptionError(
                 f"no paint found in any of {self.frames} frames with {self.hsv.describe()}; "
-                f"dominant hues seen: {self.hues.describe()}; try --paint or --hsv H1,H2,S,V"
+                f"{hues}; try --paint or --hsv H1,H2,S,V"
             )
         reasons = ", ".join(f"{k} {v}" for k, v in sorted(self.skip_reasons.items()))
+        hints = []
+        if self.skip_reasons[SKIP_SCATTERED_PAINT]:
+            hints.append(
+                f"scattered pixels are no stroke ({hues}): try --paint, --hsv H1,H2,S,V "
+                "or --min-paint-neighbors"
+            )
+        if self.skip_reasons[SKIP_NO_VALID_DEPTH]:
+            hints.append("check the depth range (--min-depth-mm/--max-depth-mm)")
+        if self.skip_reasons[SKIP_TOO_LITTLE_PAINT]:
+            hints.append("lower --min-paint-points")
         raise PerceptionError(
             f"{self.paint_pixels} pixels of {self.hsv.describe()} in {self.frames} frames but "
-            f"no usable paint points ({reasons}); check the depth range "
-            f"(--min-depth-m/--max-depth-m) and --min-paint-points"
+            f"no usable paint points ({reasons}); {'; '.join(hints)}"
         )
 
     def to_dict(self) -> dict[str, Any]:

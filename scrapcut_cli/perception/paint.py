@@ -101,8 +101,13 @@ def resolve_paint(config: PaintConfig) -> HsvRange:
     No preset chosen (``None``) means orange, the default of DESIGN.md.
     """
     if config.hsv is not None:
-        h1, h2, s, v = config.hsv
-        return HsvRange(float(h1), float(h2), float(s), float(v), "custom")
+        try:  # a [paint] table in a TOML file is not checked by the command line's parser
+            h1, h2, s, v = (float(x) for x in config.hsv)
+        except (TypeError, ValueError):
+            raise PerceptionError(
+                f"paint.hsv must be four numbers H1, H2, S, V, got {config.hsv!r}"
+            ) from None
+        return HsvRange(h1, h2, s, v, "custom")
     name = DEFAULT_PAINT if config.preset is None else config.preset
     preset = PAINT_PRESETS.get(name)
     if preset is None:

@@ -41,9 +41,10 @@ class IcpOutcome:
 
     ``T_correction`` (4, 4) maps the frame's base-frame points onto the stitched cloud; it is
     the identity unless ``accepted``. ``reason``: ``accepted``, ``first_frame``,
-    ``too_few_points``, ``low_overlap``, ``no_improvement``, ``translation_too_large``,
-    ``rotation_too_large``. Fitness is the share of the frame's points with a stitched point
-    within ``icp_max_distance_m``.
+    ``low_overlap``, ``no_improvement``, ``translation_too_large``, ``rotation_too_large``.
+    Fitness is the share of the frame's overlapping points (those with a stitched point within
+    ``icp_max_distance_m``) that lie within one paint voxel of the stitched cloud; RMSE is
+    over those inliers. With ``low_overlap``, ``fitness_before`` is the overlapping share.
     """
 
     accepted: bool
@@ -121,8 +122,9 @@ class _VoxelMap:
     (vectorised, no Python loop over points) and the output order is deterministic.
     """
 
-    def __init__(self, voxel_size_m: float) -> None:
+    def __init__(self, voxel_size_m: float, *, option: str) -> None:
         self.voxel_size_m = voxel_size_m
+        self.option = option  # the command-line option that sets the voxel, for messages
         self.keys = np.zeros(0, dtype=np.int64)
         self.sums = np.zeros((0, 3))
         self.counts = np.zeros(0, dtype=np.int64)
@@ -139,7 +141,14 @@ class _VoxelMap:
         """Merge points (N, 3); new voxels remember ``viewpoint`` (3,). Returns voxels added."""
         if len(points) == 0:
             return 0
-        packed = pack_voxel_keys(voxel_keys(points, self.voxel_size_m))
+        try:
+            packed = pack_voxel_keys(voxel_keys(points, self.voxel_size_m))
+        except ValueError:
+            far = float(np.abs(points).max())
+            raise PerceptionError(
+                f"{self.option} {1000 * self.voxel_size_m:g} is too fine for points {far:.3g} m "
+                "from the base frame's origin (at most 2^20 voxels each way)"
+            ) from None
         keys, inverse = np.unique(packed, return_inverse=True)
         counts = np.bincount(inverse, minlength=keys.size)
         sums = np.column_stack(
@@ -214,8 +223,8 @@ class Stitcher:
         check_stitch_config(config)
         self.config = config
         self.perception = perception
-        self._paint = _VoxelMap(config.voxel_size_m)
-        self._surface = _VoxelMap(perception.surface_voxel_m)
+        self._paint = _VoxelMap(config.voxel_size_m, option="--stitch-voxel-mm")
+        self._surface = _VoxelMap(perception.surface_voxel_m, option="--surface-voxel-mm")
         self.steps: list[StitchStep] = []
 
     @property
@@ -278,7 +287,7 @@ class Stitcher:
     # ------------------------------------------------------------------ ICP
 
     def _refine(self, paint: FloatArray) -> IcpOutcome:
-        """Point-to-point ICP of the frame's paint against the stitched paint near it, guarded.
+        """ICP (``icp_method``) of the frame's paint against the stitched paint near it, guarded.
 
         Only the frame's points that already have a stitched neighbour within
         ``icp_max_distance_m`` take part: in a sweep each new frame also shows paint that is

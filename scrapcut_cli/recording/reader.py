@@ -6,7 +6,8 @@ stored in the recording. On top of it:
 
 - a first pass reads /tf, /tf_static and only the header bytes of the colour and depth images
   (stamp, frame id, size) to pair colour with depth by header stamp and pose each colour
-  stamp (:meth:`Recording.plan`) without decoding pixels;
+  stamp (:meth:`Recording.plan`) without decoding pixels (only the first colour and depth
+  image are decoded, so a topic of the wrong kind fails before any frame is counted);
 - a second pass streams the planned frames (:meth:`Recording.frames`), holding only the
   images whose partner has not arrived yet.
 
@@ -156,7 +157,16 @@ def detect_format(path: Path) -> str:
     if path.is_dir():
         if (path / "metadata.yaml").is_file():
             return "ros2"
-        raise RecordingError(f"{path} is a directory but not a ROS 2 bag (it has no metadata.yaml)")
+        hint = ""
+        storage = sorted(f for f in path.iterdir() if f.suffix in (".mcap", ".db3"))
+        if storage:
+            # An interrupted `ros2 bag record` leaves its storage files but no metadata.yaml.
+            hint = "; run `ros2 bag reindex` on it"
+            if storage[0].suffix == ".mcap":
+                hint = f"; open {storage[0]} itself, or run `ros2 bag reindex` on the directory"
+        raise RecordingError(
+            f"{path} is a directory but not a ROS 2 bag (it has no metadata.yaml){hint}"
+        )
     try:
         with path.open("rb") as f:
             head = f.read(16)
@@ -220,18 +230,20 @@ class Recording:
 
     def _open_error(self, exc: BaseException) -> str:
         reason = str(exc).strip() or type(exc).__name__
-        if self.format == "mcap":
-            try:
-                with self.path.open("rb") as f:
-                    f.seek(-len(_MCAP_MAGIC), os.SEEK_END)
-                    tail = f.read()
-            except OSError:
-                tail = b""
-            if tail != _MCAP_MAGIC:
-                return (
-                    f"MCAP file {self.path} is truncated (no footer; the recorder was cut off); "
-                    "`mcap recover` can salvage its complete chunks"
-                )
+        mcap_file = self.path
+        if self.format == "ros2" and self.path.is_dir():
+            storage = sorted(self.path.glob("*.mcap"), key=_split_number)
+            mcap_file = storage[0] if storage else self.path
+        if mcap_file.suffix == ".mcap" and not _has_mcap_footer(mcap_file):
+            return (
+                f"MCAP file {mcap_file} is truncated (no footer; the recorder was cut off); "
+                "`mcap recover` can salvage its complete chunks"
+            )
+        if self.format == "ros1" and "index" in reason.lower():
+            return (
+                f"cannot read ROS 1 bag {self.path}: {reason}; a bag cut off while recording "
+                "can be rebuilt with `rosbag reindex`"
+            )
         return f"cannot read {self.format} recording {self.path}: {reason}"
 
     # ------------------------------------------------------------------ lifecycle
@@ -430,16 +442,22 @@ class Recording:
         if first is None:
             raise RecordingError(f"camera_info topic {topic} has no messages")
         msg = self.deserialize(first[1], first[0])
-        if int(msg.width) and int(msg.height):
-            return m.camera_from_info(msg)
-        image = self._first_raw(self.color_topic)
-        size = None if image is None else m.raw_image_size(image[1], image[0], cdr=self._cdr)
-        if size is None:
+        width, height = int(msg.width), int(msg.height)
+        if not (width and height):
+            image = self._first_raw(self.color_topic)
+            size = None if image is None else m.raw_image_size(image[1], image[0], cdr=self._cdr)
+            if size is None:
+                raise RecordingError(
+                    f"CameraInfo on {topic} has no image size and none can be read from "
+                    f"{self.color_topic}"
+                )
+            height, width = size
+        try:
+            return m.camera_from_info(msg, width=width, height=height)
+        except RecordingError as exc:
             raise RecordingError(
-                f"CameraInfo on {topic} has no image size and none can be read from "
-                f"{self.color_topic}"
-            )
-        return m.camera_from_info(msg, width=size[1], height=size[0])
+                f"{exc} (CameraInfo on {topic}; pick another with --info-topic)"
+            ) from None
 
     def _first_raw(self, topic: str) -> tuple[str, bytes] | None:
         """(msgtype, bytes) of the first message on ``topic``, reading no further."""
@@ -542,7 +560,8 @@ class Recording:
     # ------------------------------------------------------------------ frames
 
     def plan(self) -> FramePlan:
-        """Pair colour with depth and pose every colour stamp, from headers only."""
+        """Pair colour with depth and pose every colour stamp, from headers (and the first
+        colour and depth image, decoded as a check)."""
         if self._plan is None:
             self._plan = self._make_plan()
         return self._plan
@@ -553,6 +572,7 @@ class Recording:
             raise RecordingError(f"colour topic {color.topic} has no messages")
         if not depth.stamps:
             raise RecordingError(f"depth topic {depth.topic} has no messages")
+        self._check_first_images()
         camera = self.camera
         if color.size is not None and color.size != (camera.height, camera.width):
             raise RecordingError(
@@ -584,6 +604,23 @@ class Recording:
             color_index=usable_color.astype(np.int64),
             depth_index=used_depth.astype(np.int64),
         )
+
+    def _check_first_images(self) -> None:
+        """Decode the first colour and depth image: a topic of the wrong kind (a colour image
+        as depth, JPEG depth) fails here, before a plan counts its frames as usable."""
+        checks = (
+            (self.color_topic, m.decode_color, "--color-topic"),
+            (self.depth_topic, m.decode_depth, "--depth-topic"),
+        )
+        for topic, decode, option in checks:
+            first = self._first_raw(topic)
+            if first is None:
+                continue
+            msgtype, raw = first
+            try:
+                decode(self.deserialize(raw, msgtype), msgtype)
+            except RecordingError as exc:
+                raise RecordingError(f"{topic}: {exc}; pick another with {option}") from None
 
     def _poses(
         self, base: str, camera_frame: str, stamps: NDArray[np.int64]
@@ -703,6 +740,16 @@ class Recording:
                 raise RecordingError(f"{EXPLORATION_TOPIC} messages must be JSON objects")
             steps.append(step)
         return steps
+
+
+def _has_mcap_footer(path: Path) -> bool:
+    """True if the file ends with the MCAP magic (a complete file; False if unreadable)."""
+    try:
+        with path.open("rb") as f:
+            f.seek(-len(_MCAP_MAGIC), os.SEEK_END)
+            return f.read() == _MCAP_MAGIC
+    except OSError:
+        return False
 
 
 def _pair_nearest(

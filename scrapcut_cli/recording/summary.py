@@ -84,7 +84,8 @@ class RecordingSummary:
 def summarize_recording(
     path: str | os.PathLike[str], config: RecordingConfig | None = None
 ) -> RecordingSummary:
-    """Read a recording's index, TF and image headers (no pixels) and summarise it."""
+    """Read a recording's index, TF and image headers and summarise it (the only pixels
+    decoded are the first colour and depth image, as a check)."""
     with open_recording(path, config) as rec:
         plan = rec.plan()
         counts = {t.name: t.count for t in rec.topics()}

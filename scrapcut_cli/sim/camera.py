@@ -3,8 +3,10 @@
 Numbers and their sources
 -------------------------
 Intrinsics
-    Colour stream 640×480, fx ≈ fy ≈ 615 px (69.4° × 42.5° field of view, Intel D400 datasheet,
-    doc. 337029): a typical factory calibration, principal point a few pixels off centre.
+    Colour stream 640×480, fx ≈ fy ≈ 615 px: the colour sensor sees 69.4° × 42.5° in its 16:9
+    modes (Intel D400 datasheet, doc. 337029); a 4:3 stream keeps the 42.5° vertical field,
+    fy = 240 / tan 21.25° ≈ 615 px, and is 55° wide. A typical factory calibration, principal
+    point a few pixels off centre.
     realsense-ros publishes ``plumb_bob`` with zero coefficients for the D435i colour stream.
 Depth RMS error
     σ_z = z² · s / (f · B) (Grunnet-Jepsen et al., "Tuning depth cameras for best performance",

@@ -5,7 +5,8 @@ One loop serves every mode (exploration.decision's contract)::
     decision = planner.start()
     while not decision.stop:
         execute decision.T_base_cam (IK, free DOFs, collisions)  -> or skip it
-        move there (joint-space minimum-jerk motion, /tf and /joint_states at tf_rate_hz)
+        move there (joint-space minimum-jerk motion, through the ready pose if the straight
+            move would hit the piece; /tf and /joint_states at tf_rate_hz)
         rest, capture frames_per_view images, write them
         decision = planner.observe(frame)   # the view's last image, exactly as a reader reads it
 
@@ -119,7 +120,8 @@ class RecordResult:
     views the robot could not reach even with the free DOFs (skipped), ``adjusted_views``
     views that needed a roll or back-off, ``collisions`` executed views whose true robot and
     camera pose touched the piece or floor (0 by construction; recounted as a check),
-    ``motion_collisions`` joint-space moves between views that pass through an obstacle,
+    ``motion_collisions`` moves between views that pass through an obstacle (the straight
+    joint-space move and the detour through the ready pose both blocked),
     ``camera_travel_m`` length of the camera's path, ``duration_s`` simulated time,
     ``wall_time_s`` real time.
     """
@@ -535,10 +537,11 @@ class _Session:
             assert solution.q is not None
             if solution.roll_rad != 0.0 or solution.backoff_m > 0.0:
                 self.adjusted += 1
-            blocked = self.robot.path_collision(self.q, solution.q)
+            route, blocked = self._route(solution.q)
             if blocked is not None:
                 self.motion_collisions += 1
-            self._move(solution.q)
+            for q in route:
+                self._move(q)
             # Recheck the executed pose with the TRUE hand-eye (the housing sits there).
             touching = self.robot.collision(solution.q)
             if touching is not None:
@@ -551,6 +554,7 @@ class _Session:
                 backoff_m=solution.backoff_m,
                 collision=touching,
                 motion_collision=blocked,
+                detour=len(route) > 1,
             )
             self.log.append(entry)
             decision = planner.observe(frame)
@@ -559,6 +563,24 @@ class _Session:
             if progress is not None:
                 progress(decided, max(total, decided))
         return decision.reason
+
+    def _route(self, q_target: FloatArray) -> tuple[list[FloatArray], str | None]:
+        """Joint waypoints to ``q_target`` and the collision left on the way (None if clear).
+
+        The straight joint-space move, or, when it would sweep the arm through the piece (a
+        jump to the line's other end over a ridge), a detour through the ready pose above it:
+        no motion planner, but the two moves an operator would teach.
+        """
+        blocked = self.robot.path_collision(self.q, q_target)
+        if blocked is None:
+            return [q_target], None
+        ready = np.asarray(Q_READY, dtype=np.float64)
+        clear = (
+            self.robot.collision(ready) is None
+            and self.robot.path_collision(self.q, ready) is None
+            and self.robot.path_collision(ready, q_target) is None
+        )
+        return ([ready, q_target], None) if clear else ([q_target], blocked)
 
     def _capture(self) -> Frame:
         """Rest at the current joints, render the view and write ``frames_per_view`` images."""

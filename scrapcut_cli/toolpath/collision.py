@@ -28,6 +28,8 @@ CLEARANCE_FACTOR = 1.25
 #: check: finer detail cannot change whether a 12 mm body touches it, and a dense cloud would
 #: make the check quadratic in its density.
 THINNING_FRACTION = 0.25
+#: ... but never finer than this: voxel indices must stay packable (±2^20 voxels, ±100 m here).
+MIN_THINNING_M = 1e-4
 
 
 @dataclass(frozen=True, eq=False)
@@ -88,7 +90,7 @@ def choose_torch_axes(
     cloud = np.asarray(cloud_base, dtype=np.float64).reshape(-1, 3)
     if n == 0 or len(cloud) == 0:
         return TorchAxes(axes, tilt, tilted, np.zeros(n, dtype=bool))
-    cloud = thin_cloud(cloud, THINNING_FRACTION * radius_m)
+    cloud = thin_cloud(cloud, max(THINNING_FRACTION * radius_m, MIN_THINNING_M))
     tree = cKDTree(cloud)
 
     def inside(

@@ -234,8 +234,14 @@ def fill_unsupported(
     s_ok = arc_length[ok]
     filled = np.column_stack([np.interp(arc_length, s_ok, out[ok, k]) for k in range(3)])
     norm = np.linalg.norm(filled, axis=1)
-    # Interpolating between opposite normals can cancel out: take the nearest supported one.
-    nearest = np.flatnonzero(ok)[np.clip(np.searchsorted(s_ok, arc_length), 0, len(s_ok) - 1)]
+    # Interpolating between opposite normals can cancel out: take the nearest supported one
+    # (of the supported set-points just before and just after, the closer in arc length).
+    after = np.clip(np.searchsorted(s_ok, arc_length), 0, len(s_ok) - 1)
+    before = np.clip(after - 1, 0, len(s_ok) - 1)
+    closer = np.where(
+        np.abs(arc_length - s_ok[before]) <= np.abs(s_ok[after] - arc_length), before, after
+    )
+    nearest = np.flatnonzero(ok)[closer]
     bad = norm < 0.5
     filled[bad] = out[nearest[bad]]
     filled[~bad] /= norm[~bad, None]

@@ -15,10 +15,11 @@ class CuttingPath:
     Attributes
     ----------
     positions : (N, 3) float64
-        Torch tip positions, metres: the surface point plus ``standoff_m`` along the normal.
+        Torch tip positions, metres: the surface point plus ``standoff_m`` along the torch axis
+        (the normal, or the normal tilted away from an obstacle where the flags say "tilted").
     orientations_xyzw : (N, 4) float64
-        Torch orientation; its z axis points into the surface (along −normal), x along the
-        curve tangent.
+        Torch orientation; its z axis points into the surface (along −normal unless tilted), x
+        along the curve tangent.
     normals : (N, 3) float64
         Unit surface normals at the set-points, pointing out of the surface (towards the camera
         that observed it).

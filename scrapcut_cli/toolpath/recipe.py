@@ -27,7 +27,7 @@ from scrapcut_cli.fitting.curve import Curve
 from scrapcut_cli.geometry import PolylineDistance
 from scrapcut_cli.toolpath.path import CuttingPath
 from scrapcut_cli.toolpath.pathfile import path_to_dict
-from scrapcut_cli.toolpath.setpoints import make_cutting_path
+from scrapcut_cli.toolpath.setpoints import check_toolpath_config, make_cutting_path
 from scrapcut_cli.toolpath.speeds import SpeedTable, load_speed_table
 
 if TYPE_CHECKING:
@@ -280,6 +280,12 @@ def fit_recording(
     """
     if method not in METHODS:
         raise ToolpathError(f"unknown fitting method {method!r}; known: {', '.join(METHODS)}")
+    # Tool-path parameters, the material and the thickness are checked before the recording is
+    # read: a typo should not cost minutes of stitching.
+    check_toolpath_config(config.toolpath)
+    if speeds is None:
+        speeds = load_speed_table(config.toolpath.speed_table)
+    speeds.lookup(config.toolpath.material, config.toolpath.thickness_mm)
     stitched = stitch_recording_file(recording, config=config, progress=progress)
     return fit_stitched(stitched, method=method, config=config, speeds=speeds)
 

@@ -73,7 +73,7 @@ def make_cutting_path(
     CuttingPath
         Set-points ordered along the curve; ``info`` counts flags and holds the timing figures.
     """
-    _check_config(config)
+    check_toolpath_config(config)
     surface = _points(surface_base, "surface_base")
     viewpoints = _points(surface_viewpoints, "surface_viewpoints")
     if len(surface) != len(viewpoints):
@@ -272,9 +272,12 @@ def _points(values: ArrayLike, name: str) -> FloatArray:
     return arr
 
 
-def _check_config(config: ToolpathConfig) -> None:
+def check_toolpath_config(config: ToolpathConfig) -> None:
+    """Raise :class:`ToolpathError` naming the first parameter out of its range."""
     positive = (
         "spacing_m",
+        # At zero standoff the torch body starts on the surface and every set-point collides.
+        "standoff_m",
         "normal_radius_m",
         "coarse_normal_radius_m",
         "torch_length_m",
@@ -289,8 +292,6 @@ def _check_config(config: ToolpathConfig) -> None:
     for name in ("normal_smoothing_m", "tilt_steps", "tilt_directions", "min_surface_points"):
         if getattr(config, name) < 0:
             raise ToolpathError(f"toolpath.{name} must be >= 0, got {getattr(config, name)}")
-    if config.standoff_m < 0:
-        raise ToolpathError(f"toolpath.standoff_m must be >= 0, got {config.standoff_m}")
     if not 0 <= config.max_tilt_deg < 90:
         raise ToolpathError(f"toolpath.max_tilt_deg must be in [0, 90), got {config.max_tilt_deg}")
     if not 0 < config.edge_angle_deg <= 180:
