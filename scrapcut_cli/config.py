@@ -80,6 +80,10 @@ class PerceptionConfig:
     flying_pixel_ratio: float = 0.03  # reject depth jumping > ratio * depth to a 4-neighbour
     min_paint_points: int = 20  # fewer voxels of paint after outlier removal: frame skipped
     min_paint_neighbors: int = 3  # of 4; paint pixels with fewer paint neighbours are noise
+    # Paint blobs (8-connected in the image) covering less surface than this are overspray
+    # specks, not a stroke: a speck is a drop a few mm across (at most ~12 mm^2 seen on the
+    # simulator's heavy overspray), the least a stroke shows is a wire's share (4 x 25 mm).
+    min_paint_area_m2: float = 25e-6  # 0: off
 
 
 @dataclass(frozen=True)

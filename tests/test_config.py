@@ -68,3 +68,25 @@ def test_bad_files_name_the_problem(tmp_path: Path, text: str, message: str) -> 
 def test_missing_file_is_a_config_error(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="not found"):
         load_config(tmp_path / "nope.toml")
+
+
+def test_every_stage_option_reaches_its_config_field_in_si_units() -> None:
+    """Each perception/stitch command-line option sets the field it names, scaled to SI."""
+    from scrapcut_cli.commands._options import _STAGE_OPTIONS, apply_stage_options
+
+    base = ScrapcutConfig()
+    for flag, name, stage, field_name, factor, kind, _ in _STAGE_OPTIONS:
+        default = getattr(getattr(base, stage), field_name)
+        if kind is None:  # an on/off flag
+            value: object = not default
+            expected: object = value
+        elif isinstance(default, int) and not isinstance(default, bool):
+            value = expected = default + 1
+        elif isinstance(default, str):
+            continue  # a choice; covered by the commands' own tests
+        else:
+            value = 7.0
+            expected = pytest.approx(7.0 * factor)
+        config = apply_stage_options(base, {name: value})
+        assert getattr(getattr(config, stage), field_name) == expected, flag
+        assert apply_stage_options(base, {name: None}) == base

@@ -104,7 +104,9 @@ def test_extrapolate_rejects_bad_arguments(end, step):
 
 #: Painted strokes with round caps (the paint reaches ~12 mm past each end) and the tolerance
 #: on each end of the fitted curve, mm. Over 8 strokes per case the ends lie 1.0-1.5 mm from
-#: the line's ends on average and at most 3.1 mm (continuous paint) or 8 mm (basket wires).
+#: the line's ends on average and at most 3.1 mm (continuous paint); on basket wires 2.4 mm
+#: (NURBS) and 3.2 mm (skeleton at 20 mm, whose centre wanders ~3 mm over the wire patches)
+#: on average and at most 9.3 mm (a wire at the rim of a cap, where the envelope is steep).
 CAPPED_STROKES = {
     "straight": (line_on_plane(0.5), {}, 3.5),
     "pipe": (arc_on_cylinder(), {}, 3.5),
@@ -115,7 +117,7 @@ CAPPED_STROKES = {
     "basket": (
         line_on_plane(0.473),
         {"gaps": [(s + 0.005, s + 0.035) for s in np.arange(-0.046, 0.55, 0.035)]},
-        6.0,
+        8.0,
     ),
 }
 

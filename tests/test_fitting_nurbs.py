@@ -160,9 +160,11 @@ def test_a_sharp_joint_becomes_a_kink():
 
 
 def test_gaps_are_bridged():
+    # Round caps, as sprayed: the ends are then where the line ends (square ends of ragged
+    # paint are told from caps only about half of the time; see test_fitting_ends).
     line, normals = line_on_plane(0.5)
     gaps = [(0.10, 0.14), (0.20, 0.25), (0.30, 0.34)]
-    curve = fit_nurbs(painted_stroke(line, normals, seed=6, gaps=gaps))
+    curve = fit_nurbs(painted_stroke(line, normals, seed=6, gaps=gaps, caps=True))
     _, worst, back = errors_mm(curve.points, line)
     assert worst < 3.0
     assert back < 3.0
@@ -250,7 +252,7 @@ def test_reversing_the_input_reverses_the_curve_only(helix_fit):
 
 def test_curve_runs_with_the_input_order():
     line, normals = line_on_plane(0.4)
-    pts = painted_stroke(line, normals, seed=12)
+    pts = painted_stroke(line, normals, seed=12, caps=True)  # capped: ends at the line's
     ordered = pts[np.argsort(pts[:, 0])]
     assert fit_nurbs(ordered).points[0, 0] < 0.01
     assert fit_nurbs(ordered[::-1]).points[0, 0] > 0.39

@@ -37,6 +37,7 @@ from scrapcut_cli.perception.cloud import (
     check_perception_config,
     process_frame,
     reject_isolated_pixels,
+    reject_small_blobs,
     usable_depth_pixels,
 )
 from scrapcut_cli.perception.paint import PAINT_PRESETS
@@ -123,6 +124,66 @@ def test_isolated_paint_pixels_are_dropped_solid_regions_kept() -> None:
     )
 
 
+def test_small_blobs_are_dropped_by_the_surface_they_cover() -> None:
+    # fx = fy = 300 px at 0.3 m depth: a pixel covers exactly 1 mm^2; the limit is 25 mm^2.
+    camera = CameraModel(40, 30, 300.0, 300.0, 20.0, 15.0)
+    depth = np.full((30, 40), 0.3, dtype=np.float32)
+    mask = np.zeros((30, 40), dtype=bool)
+    mask[2:6, 2:7] = True  # 20 px = 20 mm^2: a speck
+    mask[2:8, 10:15] = True  # 30 px: kept
+    mask[10:14, 2:6] = mask[14:18, 6:10] = True  # two 4x4 specks touching at a corner: 32 px
+    mask[20:24, 2:7] = True  # 20 px, but at 0.6 m: 80 mm^2
+    depth[20:24, 2:7] = 0.6
+    mask[20:22, 20:25] = True  # 10 px without depth: size unknown, kept (the depth gate decides)
+    depth[20:22, 20:25] = np.nan
+    mask[26:28, 30:35] = True  # 10 px, half of them without depth: 10 mm^2, dropped
+    depth[26, 30:35] = np.nan
+    pixels = np.flatnonzero(mask)
+    kept = reject_small_blobs(pixels, depth, camera, min_area_m2=25e-6, nearest_m=0.1)
+    expected = mask.copy()
+    expected[2:6, 2:7] = expected[26:28, 30:35] = False
+    assert np.array_equal(kept, np.flatnonzero(expected))
+    # Off, or no blob below the limit at the nearest usable depth: all kept.
+    assert np.array_equal(
+        reject_small_blobs(pixels, depth, camera, min_area_m2=0.0, nearest_m=0.1), pixels
+    )
+    assert np.array_equal(
+        reject_small_blobs(pixels, depth, camera, min_area_m2=1e-7, nearest_m=0.1), pixels
+    )
+
+
+def test_overspray_specks_do_not_reach_the_cloud(reference: np.ndarray) -> None:
+    # Overspray: paint specks 3-4 px (~3-4 mm) across, 5-30 mm beside the stroke's edge. They
+    # pass the colour and neighbour tests, and (before the blob test) stitched into a halo
+    # that carried the paint's extent past the stroke's caps.
+    frame = render_cylinder(small_camera(320, 240), top_view(0.02), reference, rust=False)
+    points = backproject_pixels(
+        frame.camera, frame.depth, np.arange(frame.depth.size), frame.T_base_cam
+    )
+    gap = PolylineDistance(reference).distance(points) - HALF_WIDTH
+    on_cylinder = radial_error(points) < 1e-6
+    paint_colour = frame.color.reshape(-1, 3)[np.flatnonzero(on_cylinder & (gap < -0.005))[0]]
+    rng = np.random.default_rng(3)
+    beside = np.flatnonzero(on_cylinder & (gap > 0.005) & (gap < 0.03))
+    color = frame.color.copy()
+    for at in rng.choice(beside, 60, replace=False):
+        v, u = divmod(int(at), 320)
+        size = int(rng.integers(3, 5))
+        color[v : v + size, u : u + size] = paint_colour
+    specks = replace(frame, color=color)
+
+    def far_share(config: PerceptionConfig) -> tuple[float, int]:
+        clouds = process_frame(specks, ORANGE, config)
+        d = PolylineDistance(reference).distance(clouds.paint_base)
+        return float(np.mean(d > HALF_WIDTH + 0.004)), int(np.sum(d <= HALF_WIDTH))
+
+    without_blob_test, stroke_before = far_share(replace(CONFIG, min_paint_area_m2=0.0))
+    assert without_blob_test > 0.03  # the specks are in the cloud
+    with_blob_test, stroke_after = far_share(CONFIG)
+    assert with_blob_test == 0.0
+    assert stroke_after >= 0.99 * stroke_before  # the stroke itself is all there
+
+
 # --------------------------------------------------------------------------- the recipe
 
 
@@ -145,7 +206,9 @@ def test_exact_frame_paint_lies_on_the_stroke_and_the_surface(
 def test_noisy_frame_rust_flying_pixels_and_holes_do_not_reach_the_cloud(
     noisy_frame: Frame, reference: np.ndarray
 ) -> None:
-    raw, _, _ = backproject_paint(noisy_frame, ORANGE, replace(CONFIG, min_paint_neighbors=0))
+    raw, _, _ = backproject_paint(
+        noisy_frame, ORANGE, replace(CONFIG, min_paint_neighbors=0, min_paint_area_m2=0.0)
+    )
     d_raw = PolylineDistance(reference).distance(raw)
     assert np.mean(d_raw > HALF_WIDTH + 0.005) > 0.001  # rust does leak into the raw filter
     clouds = process_frame(noisy_frame, ORANGE, CONFIG)
@@ -236,6 +299,8 @@ def test_bad_parameters_raise_naming_them(exact_frame: Frame) -> None:
         check_perception_config(replace(CONFIG, min_depth_m=3.0))
     with pytest.raises(PerceptionError, match="surface_band_m"):
         check_perception_config(replace(CONFIG, surface_band_m=-1.0))
+    with pytest.raises(PerceptionError, match="min_paint_area_m2"):
+        check_perception_config(replace(CONFIG, min_paint_area_m2=float("nan")))
 
 
 # --------------------------------------------------------------------------- tally
@@ -290,6 +355,7 @@ def test_scattered_specks_are_told_apart_from_paint_without_depth(exact_frame: F
     assert "\n" not in message
     assert "(scattered_paint 1)" in message and "dominant hues seen: 30 deg (100%)" in message
     assert "--min-paint-neighbors" in message and "depth range" not in message
-    # Without the neighbour test the specks are paint (with depth): the frame is used.
-    kept = process_frame(specks, ORANGE, replace(CONFIG, min_paint_neighbors=0, sor_neighbors=0))
+    # Without the neighbour and blob tests the specks are paint (with depth): the frame is used.
+    everything = replace(CONFIG, min_paint_neighbors=0, min_paint_area_m2=0.0, sor_neighbors=0)
+    kept = process_frame(specks, ORANGE, everything)
     assert kept.skip_reason is None and len(kept.paint_base) > 100

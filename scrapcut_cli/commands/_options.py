@@ -189,6 +189,16 @@ _STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
         "Statistical outlier removal: standard deviations allowed (default 2.0).",
     ),
     (
+        "--min-paint-area-mm2",
+        "min_paint_area_mm2",
+        "perception",
+        "min_paint_area_m2",
+        1e-6,
+        click.FloatRange(min=0.0),
+        "Drop paint blobs covering less surface than this, e.g. overspray specks [mm²] "
+        "(default 25; 0: off).",
+    ),
+    (
         "--min-paint-points",
         "min_paint_points",
         "perception",

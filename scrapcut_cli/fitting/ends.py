@@ -4,38 +4,53 @@ A spray stroke is a band of half width h around the intended line, and where the
 or stops it leaves a round cap: a half disc of radius about h centred on the line's end. The
 paint therefore reaches about h beyond each intended end, and a curve clamped to the paint's
 extent (``_common.data_extent``) overshoots by that much (12 mm for the usual 25 mm stroke);
-a torch following it cuts past the mark. :func:`stroke_ends` moves each end back to where the
-full-width band stops:
+a torch following it cuts past the mark. Around the stroke lies a halo of overspray specks
+(denser near the edge, out to a few centimetres), which stitching smears further; it reaches
+past the cap too, so the paint's extent lies in the halo. :func:`stroke_ends` moves each end
+back to where the full-width band stops:
 
-1. **Half width.** The distances of the paint points to the fitted curve, away from the ends
-   (at least twice the half width in from either end of the paint), are matched to a uniform
-   band: for |u| uniform on [0, h] the q-quantile is q·h, so h is the least-squares slope of
-   the 0.3 … 0.8 quantiles over q. Quantiles (no mean, no maximum) ignore outliers, the
-   blurred ragged edge and noise across the surface; paint on the wires of a basket has the
-   same lateral distribution on each wire. Points scattered isotropically around a curve (10 %
-   quantile above 0.37 of the median; a band's is 0.2) have no band edge: "no band", kept.
-2. **The end window.** The points within three half widths of an end are placed by their
+1. **The edge profile.** The distances |u| of the paint points to the fitted curve, away from
+   the ends (at least twice the half width in from either end of the paint), have a density
+   that is flat across the band, falls across its edge (blur, ragged edge, misregistered
+   views) and then tails off (the halo). Its most likely non-increasing estimate (Grenander:
+   the slopes of the least concave majorant of their empirical distribution, from a convex
+   hull) over the band's own density (between the 0.2 and 0.6 quantiles: the inner half of a
+   band is never halo, and 3-D noise thins its first millimetres) is the **edge profile**
+   P(t), the paint density at a signed distance t from the edge (negative inside), relative
+   to the band's. The **half width** h is the area under P's levels 0.3-0.7 stretched to 0-1:
+   the middle of a blurred or ragged edge (its half-density point), also when a slightly
+   off-centre curve sees the edge at h - e on one side and h + e on the other; a halo
+   sparser than 0.3 of the band counts for nothing. Points scattered isotropically around a
+   curve (10 % quantile above 0.37 of the median; a band's is 0.2) have no band edge:
+   "no band", kept.
+2. **The end window.** The dense paint ends where a run of h/2 along the line holds less than
+   half the band's points within the band's width (a halo is sparser); the window runs from
+   three half widths (plus the profile's reach, where P falls below 5 %) before it, half a
+   half width beyond that end or at the paint's tip if sooner. Its points are placed by their
    position x along the curve extended straight past its end and their offset d across the
    line within the band's plane (its normal is the direction least spanned by the offsets and
    the tangents: paint that wrapped over an edge beside the end, onto the top of an I-beam
-   flange, is off the plane and left out). The band's local half width h_b is the quantile
-   fit over the window's inner half (the global h when they disagree by more than 25 %).
-3. **A round cap.** The window's points are taken as uniform over a band of half width h_b
-   that stops at E and is closed by a half disc of radius h_c centred at E, with a soft edge
-   (a Gaussian of width σ, measured from the share of band points beyond h_b, so noise and
-   ragged edges count) and a small share of outliers; (E, h_c) maximise the likelihood with
-   the prior h_c = h_b ± 5 %. The point-process likelihood is what makes E definite: every
-   unit of area the region claims without points costs, every point outside costs more. It
-   is a mean over the points (the same cloud given twice ends at the same place) weighed as
-   the points of a 2 mm stitching grid over the window's painted length.
+   flange, is off the plane and left out). The band's local half width h_b is the most likely
+   shift of the profile for the offsets of the window's inner part (prior h ± 10 %).
+3. **A round cap.** The window's points are taken as drawn with density P(δ), δ the signed
+   distance from a region made of the band of half width h_b up to E and a half disc of radius
+   h_c centred at E, normalised over the window (the paint's own spill, halo included, is
+   expected around the cap as it is beside the band); (E, h_c) maximise the likelihood with
+   the prior h_c = h_b ± 7.5 %. The point-process likelihood is what makes E definite: every
+   unit of area the region claims without points costs, every point outside costs by how
+   much sparser the paint is at its distance from the edge. It is a mean over the points (the
+   same cloud given twice ends at the same place) weighed as the points of a 2 mm stitching
+   grid over the window's painted length.
 4. **Or a square end.** Paint that runs off the edge of a piece (or out of the camera's view)
-   stops square, at full width: the same likelihood with no cap. It is chosen only when it
-   beats the round cap by ``SQUARE_EVIDENCE`` nats; the line then ends at the paint's edge
-   (cutting short of an edge would leave the piece attached). On ragged, sparse paint a square
-   end is recognised about half of the time and otherwise taken for a cap; ``end_trim="none"``
-   keeps every end where the paint ends.
+   stops square, at full width: the same likelihood with a rectangle. It is chosen only when
+   it beats the round cap by ``SQUARE_EVIDENCE`` nats and the paint just inside the tip is as
+   wide as the band (specks beside it do not count); the line then ends at the paint's edge
+   (cutting short of an edge would leave the piece attached). On ragged, sparse paint a
+   square end is recognised about half of the time and otherwise taken for a cap;
+   ``end_trim="none"`` keeps every end where the paint ends.
 5. **Or gapped paint.** When the window's paint has gaps (an empty run over 4 mm: a basket's
-   wires), a density has too little to go on; the end is the envelope instead: the last E
+   wires), a density has too little to go on; the end is the envelope instead (with the
+   stroke's half width h: a wire patch or two tell the local one poorly): the last E
    that keeps the points inside the band and cap (a wire across the cap, narrowed to the
    cap's chord, places E; a full-width wire says the line goes at least that far). An end
    whose cap falls in a gap cannot be seen: the curve ends on the last wire.
@@ -43,10 +58,11 @@ full-width band stops:
    ``MAX_TRIM_SHARE`` of the extent, so a stroke shorter than its own width keeps at least half
    of its length.
 
-The grid search (E on a 1 mm then 0.2 mm grid, h_c over seven ratios) is vectorised numpy
-written here: no library fits this region model. ``mode="cap"`` always assumes round caps,
-``"none"`` keeps the extent, and a fixed ``trim_m`` (for a stroke width known beforehand)
-replaces the estimate.
+The grid search (E on a 2 mm then 0.25 mm grid, h_c over seven ratios, the normalisation
+integrated on a 1 mm grid) is vectorised numpy written here: no library fits this region
+model; the hull is scipy's (Qhull). ``mode="cap"`` always assumes round caps, ``"none"``
+keeps the extent, and a fixed ``trim_m`` (for a stroke width known beforehand) replaces the
+estimate.
 """
 
 from __future__ import annotations
@@ -56,7 +72,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import log_ndtr
+from scipy.spatial import ConvexHull, QhullError
 
 from scrapcut_cli.errors import FittingError
 from scrapcut_cli.fitting._common import arc_positions, extended_polyline, extent_of
@@ -66,27 +82,32 @@ FloatArray = NDArray[np.float64]
 
 #: ``end_trim`` modes: estimate each end's shape; always a round cap; no trimming.
 END_TRIM_MODES = ("auto", "cap", "none")
-#: Quantiles of the lateral distance matched to a uniform band (robust to edges and outliers).
-_QUANTILES = np.linspace(0.3, 0.8, 6)
 #: A square end must beat the round cap by this log-likelihood (nats): spray caps are the rule.
-SQUARE_EVIDENCE = 8.0
+#: (Over 40 simulated strokes each: no capped end, with or without a heavy overspray halo,
+#: reaches it; clean square ends do 80 % of the time, ragged ones about half.)
+SQUARE_EVIDENCE = 5.0
 #: ... and its paint just inside the tip must be this wide (share of the band's half width).
 _SQUARE_WIDTH = 0.85
 #: Each end moves in by at most this share of the paint's extent.
 MAX_TRIM_SHARE = 0.25
-#: Windows at the ends, in half widths: the whole window, and its inner (band) part.
+#: Windows at the ends, in half widths (plus the profile's reach): the whole window, and how
+#: far from its outer end its inner (band) part stops.
 _WINDOW = 3.0
 _BAND_PART = 1.5
-#: Points counted at an end: within this many half widths of the curve, and at most this many
-#: off the band's plane.
+#: Points counted at an end: within this many half widths of the curve (and the radius the
+#: profile was measured in), and at most this many off the band's plane.
 _NEAR = 2.5
 _OFF_PLANE = 0.5
 #: The curve is extended straight by this much past its ends to place the points beyond them.
 _REACH = 0.05
-#: Share of outliers in the end model, and the prior spread of the cap radius over h_b.
-_OUTLIERS = 0.03
-_CAP_PRIOR = 0.05
-_CAP_RATIOS = np.linspace(0.85, 1.15, 7)  # three prior widths either way
+#: Prior spread of the cap radius over h_b (a ragged stroke's width changes by that much within
+#: a cap's length), and the ratios tried (two spreads either way).
+_CAP_PRIOR = 0.075
+_CAP_RATIOS = np.linspace(0.85, 1.15, 7)
+#: Local half widths tried, as shares of the stroke's, and their prior spread (a hand-held
+#: can's stroke varies by about 10 % along the line).
+_LOCAL_WIDTHS = np.linspace(0.75, 1.25, 51)
+_WIDTH_PRIOR = 0.1
 #: Fewest points for a half-width fit, and for an end model.
 _MIN_WIDTH_POINTS = 20
 _MIN_END_POINTS = 15
@@ -95,6 +116,22 @@ _VOXEL_M = 0.002
 #: A band: the 10 % quantile of the lateral distance is at most this share of the median
 #: (a uniform band: 0.2; the distances of isotropic noise around a curve, Rayleigh: 0.39).
 _BAND_SHAPE = 0.37
+#: Relative paint density of the profile's floor (stray points anywhere), and the density
+#: whose distance beyond the edge is the profile's reach.
+_FLOOR = 0.01
+_REACH_DENSITY = 0.05
+#: Quantiles of |u| between which the band's own density is measured.
+_INSIDE = (0.2, 0.6)
+#: Density levels (share of the band's) below which the paint is no band, above which all
+#: band, when the edge is placed.
+_EDGE_LEVEL = 0.3
+#: The dense paint ends where a run of this many half widths holds less than half the band's.
+_DENSE_RUN = 0.5
+#: Integration step of the end model's normalisation, metres.
+_STEP_M = 0.001
+#: The end's grid search: a coarse step over the whole range, then a fine one around its best.
+_COARSE_M = 0.002
+_FINE_M = 0.00025
 #: Slices along the window (metres), and the empty run between paint that makes it gapped.
 _SLICE_M = 0.001
 _GAP_M = 0.004
@@ -134,6 +171,49 @@ class StrokeEnds:
             "end_trim_end_m": float(trims[1]),
             "end_shape": [shapes[0], shapes[1]],
         }
+
+
+@dataclass(frozen=True, eq=False)
+class EdgeProfile:
+    """The paint density across a band's edge, relative to the band's inside.
+
+    ``density`` (K,) at signed distances ``t`` (K,) from the edge (metres, increasing;
+    negative inside the band) is non-increasing, 1 deep inside, and never below ``_FLOOR``
+    (stray points); ``half_width`` (metres) is where it crosses one half.
+    """
+
+    half_width: float
+    t: FloatArray
+    density: FloatArray
+
+    def __call__(self, t: FloatArray) -> FloatArray:
+        """P at signed distances ``t`` (any shape), metres: 1 before the table, the floor
+        after it."""
+        return np.asarray(np.interp(t, self.t, self.density, left=1.0, right=_FLOOR))
+
+    @property
+    def reach(self) -> float:
+        """How far beyond the edge the paint (its blur and halo) stays denser than
+        ``_REACH_DENSITY`` of the band, metres (at most two half widths)."""
+        sparse = (self.t >= 0.0) & (self.density <= _REACH_DENSITY)
+        t = float(self.t[int(np.argmax(sparse))]) if sparse.any() else float(self.t[-1])
+        return float(np.clip(t, 0.0, 2.0 * self.half_width))
+
+    def integral(self, a: FloatArray, b: FloatArray) -> FloatArray:
+        """∫ P(t) dt from ``a`` to ``b`` (arrays of one shape), metres."""
+        return self._antiderivative(b) - self._antiderivative(a)
+
+    def _antiderivative(self, x: FloatArray) -> FloatArray:
+        t, p = self.t, self.density
+        table = np.concatenate([[0.0], np.cumsum(0.5 * (p[1:] + p[:-1]) * np.diff(t))])
+        x = np.asarray(x, dtype=np.float64)
+        return np.asarray(
+            np.where(
+                x < t[0],
+                x - t[0],  # density 1 before the table
+                np.where(x > t[-1], table[-1] + _FLOOR * (x - t[-1]), np.interp(x, t, table)),
+            )
+        )
 
 
 def check_end_trim(mode: str, trim_m: float | None, where: str) -> None:
@@ -187,31 +267,41 @@ def stroke_ends(
         extent = extent_of(pos[near], quantile=quantile, length=polyline_length(polyline))
     lo, hi = float(extent[0]), float(extent[1])
     limit = MAX_TRIM_SHARE * max(hi - lo, 0.0)
-    half = stroke_half_width(dist[near], pos[near], lo, hi)
+    profile = band_profile(dist[near], pos[near], lo, hi)
+    half = None if profile is None else profile.half_width
     if trim_m is not None:
         trim = min(float(trim_m), limit)
         return StrokeEnds(lo + trim, hi - trim, half, (trim, trim), ("fixed", "fixed"))
-    if mode == "none" or half is None:
+    if mode == "none" or profile is None:
         return StrokeEnds(lo, hi, half, (0.0, 0.0), ("none", "none"))
+    half = profile.half_width
     if not _is_band(dist[near], pos[near], lo, hi, half):
         # Isotropic noise around a curve, or paint on wires running along it: no band edge
         # to read a cap from.
         return StrokeEnds(lo, hi, half, (0.0, 0.0), ("no band", "no band"))
     middle = 0.5 * (lo + hi)
+    reach = profile.reach
+    depth = min(_NEAR * half, radius)  # across: no farther than the profile was measured
+    strip = near & (dist <= half)
+    inner = (pos >= lo + 2.0 * half) & (pos <= hi - 2.0 * half)
+    per_metre = np.count_nonzero(strip & inner) / max(hi - lo - 4.0 * half, 1e-9)
     ends = []
     # The start is the end of the mirrored positions.
-    for sign, tip in ((-1.0, -lo), (1.0, hi)):
+    for sign, paint_tip in ((-1.0, -lo), (1.0, hi)):
         p = sign * pos
-        window = np.flatnonzero((p >= max(tip - _WINDOW * half, sign * middle)) & near)
+        tip = min(paint_tip, _dense_end(p[strip], per_metre, half=half) + _DENSE_RUN * half)
+        start = max(tip - _WINDOW * half - reach, sign * middle)
+        window = np.flatnonzero((p >= start) & near)
         lateral, off_plane = _in_band_plane(points[window], extended, arc[window])
-        keep = (off_plane <= _OFF_PLANE * half) & (lateral <= _NEAR * half)
+        keep = (off_plane <= _OFF_PLANE * half) & (lateral <= depth)
         ends.append(
             _line_end(
                 p[window[keep]],
                 lateral[keep],
                 tip=tip,
-                start=max(tip - _WINDOW * half, sign * middle),
-                half=half,
+                start=start,
+                profile=profile,
+                depth=depth,
                 mode=mode,
             )
         )
@@ -221,20 +311,71 @@ def stroke_ends(
     return StrokeEnds(lo + trim0, hi - trim1, half, (trim0, trim1), (shape0, shape1))
 
 
-def stroke_half_width(dist: FloatArray, pos: FloatArray, lo: float, hi: float) -> float | None:
-    """Half width of a painted band from the lateral distances (N,) of its points and their
-    arc positions (N,) along the centre line, metres: the points at least two half widths in
-    from the ends of the paint's extent [lo, hi] (a first guess from the middle half; all the
-    points of a short stroke). None with fewer than 10 points."""
+def band_profile(dist: FloatArray, pos: FloatArray, lo: float, hi: float) -> EdgeProfile | None:
+    """The edge profile of a painted band (:func:`edge_profile`) from the lateral distances
+    (N,) of its points and their arc positions (N,) along the centre line, metres: the points
+    at least two half widths in from the ends of the paint's extent [lo, hi] (a first guess
+    from the middle half; all the points of a short stroke). None with fewer than 10 points."""
     length = hi - lo
     middle = (pos >= lo + 0.25 * length) & (pos <= hi - 0.25 * length)
-    guess = _uniform_half_width(dist[middle]) if middle.sum() >= 10 else None
+    guess = edge_profile(dist[middle]) if middle.sum() >= 10 else None
     if guess is None:
-        return _uniform_half_width(dist) if len(dist) >= 10 else None
-    inner = (pos >= lo + 2.0 * guess) & (pos <= hi - 2.0 * guess)
+        return edge_profile(dist)
+    inner = (pos >= lo + 2.0 * guess.half_width) & (pos <= hi - 2.0 * guess.half_width)
     if inner.sum() >= _MIN_WIDTH_POINTS:
-        return _uniform_half_width(dist[inner])
+        return edge_profile(dist[inner]) or guess
     return guess
+
+
+def stroke_half_width(dist: FloatArray, pos: FloatArray, lo: float, hi: float) -> float | None:
+    """Half width of a painted band (metres) from the lateral distances (N,) of its points and
+    their arc positions (N,) along the centre line: see :func:`band_profile`."""
+    profile = band_profile(dist, pos, lo, hi)
+    return None if profile is None else profile.half_width
+
+
+def edge_profile(dist: FloatArray) -> EdgeProfile | None:
+    """The edge profile and half width of a band from the lateral distances (N,) of its points
+    (metres; see the module text, step 1). None with fewer than 10 points or no spread.
+
+    The least concave majorant of the empirical distribution of |u| is the upper hull of its
+    steps: its slopes are the most likely non-increasing density (Grenander's estimator).
+    """
+    if len(dist) < 10:
+        return None
+    qa, qb = np.quantile(dist, _INSIDE, method="inverted_cdf")
+    if qb - qa <= 1e-9:
+        return None
+    inside = (_INSIDE[1] - _INSIDE[0]) / float(qb - qa)  # the band's share per metre of |u|
+    # Distinct values and their cumulative shares: the same cloud given twice has the same.
+    values, counts = np.unique(dist, return_counts=True)
+    x = np.concatenate([[0.0], values, [values[-1]]])
+    y = np.concatenate([[0.0], np.cumsum(counts) / len(dist), [0.0]])
+    # The last point (x_max, 0) closes the hull below, so collinear steps (evenly spaced
+    # distances) still make a polygon; the upper chain runs counter-clockwise from
+    # (x_max, 1) back to the origin.
+    try:
+        vertices = ConvexHull(np.column_stack([x, y])).vertices
+    except QhullError:
+        return None
+    top = len(x) - 2
+    if top not in vertices or 0 not in vertices:
+        return None
+    turn = np.roll(vertices, -int(np.flatnonzero(vertices == top)[0]))
+    chain = turn[: int(np.flatnonzero(turn == 0)[0]) + 1][::-1]  # origin ... (x_max, 1)
+    width = np.diff(x[chain])
+    wide = width > 0.0
+    slopes = np.diff(y[chain])[wide] / width[wide]
+    mids = (0.5 * (x[chain][:-1] + x[chain][1:]))[wide]
+    rel = np.minimum(slopes / inside, 1.0)
+    # The edge: the area under the density, levels between _EDGE_LEVEL and 1 - _EDGE_LEVEL
+    # stretched to 0-1 (a halo below that level counts for nothing). A symmetric blur or
+    # ragged edge ends up at its middle (its half-density point), and so does an edge made
+    # of two (a curve slightly off the band's centre sees it at h - e on one side, h + e on
+    # the other, at half the density in between).
+    level = np.clip((rel - _EDGE_LEVEL) / (1.0 - 2.0 * _EDGE_LEVEL), 0.0, 1.0)
+    half = float(np.sum(level * width[wide]))
+    return EdgeProfile(half_width=half, t=mids - half, density=np.maximum(rel, _FLOOR))
 
 
 def _is_band(dist: FloatArray, pos: FloatArray, lo: float, hi: float, half: float) -> bool:
@@ -247,12 +388,18 @@ def _is_band(dist: FloatArray, pos: FloatArray, lo: float, hi: float, half: floa
     return bool(q10 <= _BAND_SHAPE * q50)
 
 
-def _uniform_half_width(dist: FloatArray) -> float:
-    """h of a uniform band: the slope of the 0.3 … 0.8 quantiles of |u| over q (least
-    squares through the origin)."""
-    # The empirical quantile (no interpolation): a cloud given twice over has the same width.
-    q = np.quantile(dist, _QUANTILES, method="inverted_cdf")
-    return float(_QUANTILES @ q / (_QUANTILES @ _QUANTILES))
+def _dense_end(p: FloatArray, per_metre: float, *, half: float) -> float:
+    """The last position (of the positions p (M,) of the points within the band's width)
+    ending a run of ``_DENSE_RUN`` half widths that holds at least half the band's points per
+    metre (``per_metre``): where the dense paint ends (a halo beyond is sparser). +inf when no
+    run is that dense."""
+    if len(p) == 0 or per_metre <= 0.0:
+        return float(np.inf)
+    run = _DENSE_RUN * half
+    order = np.sort(p)
+    count = np.arange(1, len(order) + 1) - np.searchsorted(order, order - run, side="right")
+    dense = count >= 0.5 * per_metre * run
+    return float(order[dense].max()) if dense.any() else float(np.inf)
 
 
 def _in_band_plane(
@@ -281,28 +428,60 @@ def _in_band_plane(
     return np.sqrt(np.maximum(length**2 - off_plane**2, 0.0)), off_plane
 
 
+def _local_half_width(
+    p: FloatArray, d: FloatArray, profile: EdgeProfile, *, start: float, depth: float
+) -> float:
+    """The band's half width in a window: the shift of the edge profile that makes the
+    lateral offsets d (M,) (up to ``depth``; positions p (M,) from ``start``, metres) most
+    likely, with the prior h_b = h ± ``_WIDTH_PRIOR`` (a few wire patches say little)."""
+    widths = profile.half_width * _LOCAL_WIDTHS
+    log_p = np.log(profile(d[None, :] - widths[:, None])).mean(axis=1)
+    norm = profile.integral(-widths, depth - widths)
+    prior = -0.5 * ((_LOCAL_WIDTHS - 1.0) / _WIDTH_PRIOR) ** 2
+    score = (log_p - np.log(norm)) * _evidence(p, start, profile.half_width) + prior
+    return float(widths[int(np.argmax(score))])
+
+
+def _evidence(p: FloatArray, start: float, half: float) -> float:
+    """How many points a window's paint at positions p (M,) from ``start`` is worth: the
+    points of a stitched cloud's 2 mm voxel grid over its painted 1 mm slices, across a band
+    of half width ``half`` (at least 1). Likelihoods are means over the points (a cloud given
+    twice over ends at the same place) weighed by this."""
+    slices = len(np.unique(np.floor((p - start) / _SLICE_M)))
+    return max(slices * _SLICE_M * 2.0 * half / _VOXEL_M**2, 1.0)
+
+
 def _line_end(
-    p: FloatArray, d: FloatArray, *, tip: float, start: float, half: float, mode: str
+    p: FloatArray,
+    d: FloatArray,
+    *,
+    tip: float,
+    start: float,
+    profile: EdgeProfile,
+    depth: float,
+    mode: str,
 ) -> tuple[float, str]:
     """Where the full-width band ends, as a position: the window's points at positions
-    ``p`` (M,) (from ``start``, the line running towards increasing positions, the paint's tip
-    at ``tip``) and lateral offsets ``d`` (M,), metres. Returns (position, shape)."""
+    ``p`` (M,) (from ``start``, the line running towards increasing positions, the dense
+    paint's tip at ``tip``) and lateral offsets ``d`` (M,) up to ``depth``, metres. Returns
+    (position, shape)."""
     if len(p) < _MIN_END_POINTS:
         return tip, "none"  # too little paint at this end to tell: kept
-    band = p <= tip - _BAND_PART * half
-    hb = _uniform_half_width(d[band]) if band.sum() >= _MIN_WIDTH_POINTS else half
-    if not 0.75 * half <= hb <= 1.25 * half:
-        hb = half  # not a uniform band there (a basket's wires): the stroke's width
-    if _gapped(p, start=start, tip=tip, half=hb):
-        return min(_envelope_end(p, d, band_half=hb), tip), "gapped"
-    # The edge's blur: a uniform band blurred by a Gaussian of width s puts a share
-    # s / (sqrt(2 pi) h) of its points beyond h.
-    ref = d[band] if band.sum() >= _MIN_WIDTH_POINTS else d
-    sigma = float(np.clip(np.sqrt(2.0 * np.pi) * hb * np.mean(ref > hb), 0.0003, 0.25 * hb))
-    model = _EndModel(p, d, start=start, band_half=hb, sigma=sigma)
-    e_round, ll_round = model.best(tip, round_cap=True)
+    half, reach = profile.half_width, profile.reach
+    if _gapped(p, start=start, tip=tip - reach, half=half):
+        # A wire patch or two tell the local width poorly: the stroke's.
+        return min(_envelope_end(p, d, band_half=half), tip), "gapped"
+    band = p <= tip - _BAND_PART * half - reach
+    hb = (
+        _local_half_width(p[band], d[band], profile, start=start, depth=depth)
+        if band.sum() >= _MIN_WIDTH_POINTS
+        else half
+    )
+    model = _EndModel(p, d, start=start, band_half=hb, depth=depth, profile=profile)
+    low = tip - 2.0 * hb - reach
+    e_round, ll_round = model.best(low, tip, round_cap=True)
     if mode == "auto" and _full_width_at_tip(p, d, tip=tip, band_half=hb):
-        e_square, ll_square = model.best(tip, round_cap=False)
+        e_square, ll_square = model.best(low, tip, round_cap=False)
         if ll_square > ll_round + SQUARE_EVIDENCE:
             return min(e_square, tip), "square"
     return min(e_round, tip), "round"
@@ -311,9 +490,10 @@ def _line_end(
 def _full_width_at_tip(p: FloatArray, d: FloatArray, *, tip: float, band_half: float) -> bool:
     """Whether the paint just inside its tip (0.05-0.3 half widths in) is as wide as the band,
     as a square end's is (a round cap's chord there is at most 0.7 h_b): the uniform width
-    estimate Q80/0.8 of the lateral offsets there reaches ``_SQUARE_WIDTH`` h_b. Paint heaped
-    at the very tip (wrapped over an edge, stray points) does not count."""
-    zone = (p >= tip - 0.3 * band_half) & (p <= tip - 0.05 * band_half)
+    estimate Q80/0.8 of the lateral offsets there within the band's width reaches
+    ``_SQUARE_WIDTH`` h_b. Paint heaped at the very tip (wrapped over an edge, stray points)
+    and overspray beside the cap (beyond the band's width) do not count."""
+    zone = (p >= tip - 0.3 * band_half) & (p <= tip - 0.05 * band_half) & (d <= band_half)
     if zone.sum() < 5:
         return False
     width = float(np.quantile(d[zone], 0.8, method="inverted_cdf")) / 0.8
@@ -322,8 +502,8 @@ def _full_width_at_tip(p: FloatArray, d: FloatArray, *, tip: float, band_half: f
 
 def _gapped(p: FloatArray, *, start: float, tip: float, half: float) -> bool:
     """Whether the window's paint (positions (M,) from ``start``) has gaps: an empty run
-    longer than ``_GAP_M`` opening before the outer half of a cap (its sparse tip, and stray
-    points past the paint's tip, leave empty runs too)."""
+    longer than ``_GAP_M`` opening before the outer half of a cap (its sparse tip, a halo,
+    and stray points past the paint's tip leave empty runs too)."""
     slices = np.unique(np.floor((p - start) / _SLICE_M))
     edges = np.concatenate([[-1.0], slices])
     run = np.diff(edges) > _GAP_M / _SLICE_M
@@ -347,69 +527,111 @@ def _envelope_end(p: FloatArray, d: FloatArray, *, band_half: float) -> float:
 
 
 class _EndModel:
-    """Log-likelihood of the window's points (positions p, lateral offsets d) for a band of
-    half width ``band_half`` from ``start`` to E, closed by a half disc of radius h_c at E (or
-    square), with Gaussian-blurred edges and a uniform share of outliers."""
+    """Log-likelihood of the window's points (positions p, lateral offsets d up to ``depth``)
+    for a region made of a band of half width ``band_half`` from ``start`` to E and a half
+    disc of radius h_c at E (or a square end): each point's density is the edge profile at its
+    signed distance from the region, normalised over the window's box (from ``start`` to one
+    depth past the last point, ``depth`` either side)."""
 
     def __init__(
-        self, p: FloatArray, d: FloatArray, *, start: float, band_half: float, sigma: float
+        self,
+        p: FloatArray,
+        d: FloatArray,
+        *,
+        start: float,
+        band_half: float,
+        depth: float,
+        profile: EdgeProfile,
     ) -> None:
         self.p, self.d = p, d
-        self.start, self.hb, self.sigma = start, band_half, sigma
-        # Outliers spread over the window's box (its length plus a cap, 2 x the counted width).
-        self.box = (float(p.max()) - start + band_half) * 2.0 * _NEAR * band_half
-        # The evidence the window holds, in points of a stitched cloud's 2 mm voxel grid over
-        # its painted 1 mm slices: the likelihood is a mean over the points (a cloud given
-        # twice over ends at the same place) weighed by this.
-        slices = len(np.unique(np.floor((p - start) / _SLICE_M)))
-        self.weight = max(slices * _SLICE_M * 2.0 * band_half / _VOXEL_M**2, 1.0)
+        self.start, self.hb, self.profile = start, band_half, profile
+        # The box runs a depth past the last point, so every candidate region and its spill
+        # lie inside it: a cap claiming empty area beyond the paint pays for it.
+        self.stop = float(p.max()) + depth
+        # Lateral samples (cell centres) for the normalisation: the region is symmetric.
+        cells = np.arange(int(np.ceil(depth / _STEP_M)), dtype=np.float64)
+        self.across: FloatArray = (cells + 0.5) * _STEP_M
+        # ∫ P across the box where only the band's sides are near: the same for every E.
+        self.band_row = 2.0 * _STEP_M * float(profile(self.across - band_half).sum())
+        self.weight = _evidence(p, start, band_half)
 
-    def best(self, tip: float, *, round_cap: bool) -> tuple[float, float]:
-        """(E, score) of the best end: a 1 mm grid over [tip - 2 h_b, tip], then 0.2 mm around
-        its best."""
-        low = self.start + 0.0005
-        coarse = np.arange(tip - 2.0 * self.hb, tip + 0.0005, 0.001)
-        coarse = coarse[coarse > low]
+    def best(self, low: float, tip: float, *, round_cap: bool) -> tuple[float, float]:
+        """(E, score) of the best end: a 2 mm grid over [low, tip], then 0.25 mm around its
+        best."""
+        first = self.start + 0.0005
+        coarse = np.arange(low, tip + 0.5 * _COARSE_M, _COARSE_M)
+        coarse = coarse[coarse > first]
         if len(coarse) == 0:
             return tip, -np.inf
-        e, _ = self._search(coarse, round_cap)
-        fine = np.arange(e - 0.001, e + 0.001 + 1e-9, 0.0002)
-        return self._search(fine[fine > low], round_cap)
+        reach = _COARSE_M + _FINE_M
+        search = _Search(self, coarse[0] - reach, coarse[-1] + reach, round_cap=round_cap)
+        e, _ = search.run(coarse)
+        fine = np.arange(e - _COARSE_M, e + _COARSE_M + 1e-9, _FINE_M)
+        return search.run(fine[fine > first])
 
-    def _search(self, ends: FloatArray, round_cap: bool) -> tuple[float, float]:
-        # Points short of every candidate end are in the band for all of them: their terms
-        # differ between candidates only by the area, and those deep inside the band (edge
-        # term above -1e-9) are counted rather than evaluated one by one.
-        varying = self.p > ends.min()
-        band_terms = log_ndtr((self.hb - self.d[~varying]) / self.sigma)
-        deep = int(np.count_nonzero(band_terms > -1e-9))
-        edge = band_terms[band_terms <= -1e-9]
-        p, d = self.p[varying], self.d[varying]
-        x = p[None, :] - ends[:, None]  # (E, M): how far beyond the end each point is
-        beyond = x > 0.0
-        across = (d - self.hb)[None, :]
-        outlier = np.log(_OUTLIERS / self.box)
-        best_score, best_e = -np.inf, float(ends[0])
-        ratios = _CAP_RATIOS if round_cap else np.zeros(1)
-        r = np.hypot(np.maximum(x, 0.0), d[None, :]) if round_cap else None
-        for ratio in ratios:
-            hc = ratio * self.hb
-            if round_cap:
-                assert r is not None
-                out = np.where(beyond, r - hc, across)
-                prior = -0.5 * ((ratio - 1.0) / _CAP_PRIOR) ** 2
-            else:
-                out = np.where(beyond, np.maximum(across, x), across)
-                prior = 0.0
-            area = 2.0 * self.hb * (ends - self.start) + 0.5 * np.pi * hc**2
-            density = np.log((1.0 - _OUTLIERS) / area)  # (E,)
-            total = (
-                np.logaddexp(log_ndtr(-out / self.sigma) + density[:, None], outlier).sum(axis=1)
-                + np.logaddexp(edge[None, :] + density[:, None], outlier).sum(axis=1)
-                + deep * np.logaddexp(density, outlier)
-            )
-            score = total / len(self.p) * self.weight + prior
-            k = int(np.argmax(score))
-            if score[k] > best_score:
-                best_score, best_e = float(score[k]), float(ends[k])
-        return best_e, best_score
+    def distance(
+        self, x: FloatArray, d: FloatArray, hc: FloatArray | float, round_cap: bool
+    ) -> FloatArray:
+        """Signed distance (negative inside) from the region of points x along the line
+        (from E) and d across it, for cap radii ``hc`` (all broadcast), metres."""
+        across = d - self.hb
+        if round_cap:
+            # Up to E the band's sides; beyond, the cap's rim (as the cap ends the band).
+            return np.asarray(np.where(x > 0.0, np.hypot(np.maximum(x, 0.0), d) - hc, across))
+        inside = np.maximum(across, x)  # depth under the nearer of side and end face
+        outside = np.hypot(np.maximum(x, 0.0), np.maximum(across, 0.0))
+        return np.asarray(np.where((across <= 0.0) & (x <= 0.0), inside, outside))
+
+
+class _Search:
+    """The end model's scores for candidate ends within [lowest, highest], one shape, all cap
+    radii at once (arrays: radius x candidate x point).
+
+    Points more than a half width short of every candidate are inside the band whatever E is
+    (and far from a square end's face): their terms are summed once. The normalisation is
+    tabulated once per cap radius as a cumulative integral over positions u = x - E along the
+    box (the band's constant row up to where the end's shape begins).
+    """
+
+    def __init__(self, model: _EndModel, lowest: float, highest: float, *, round_cap: bool) -> None:
+        self.model, self.round_cap = model, round_cap
+        varying = model.p > lowest - model.hb
+        self.fixed = float(np.log(model.profile(model.d[~varying] - model.hb)).sum())
+        self.p, self.d = model.p[varying], model.d[varying]
+        self.count = len(model.p)
+        ratios = _CAP_RATIOS if round_cap else np.ones(1)
+        self.radii = (ratios * model.hb)[:, None, None]  # (R, 1, 1)
+        self.prior = -0.5 * ((ratios - 1.0) / _CAP_PRIOR) ** 2 if round_cap else np.zeros(1)
+        self.u = np.arange(
+            model.start - highest - _STEP_M, model.stop - lowest + 2.0 * _STEP_M, _STEP_M
+        )
+        # Where the row differs from the band's: beyond E (a cap), or a half width before it
+        # (a square end's face).
+        shaped = self.u > (0.0 if round_cap else -model.hb - _STEP_M)
+        rows = np.full((len(ratios), len(self.u)), model.band_row)
+        delta = model.distance(
+            self.u[None, shaped, None], model.across[None, None, :], self.radii, round_cap
+        )
+        rows[:, shaped] = 2.0 * _STEP_M * model.profile(delta).sum(axis=2)
+        zero = np.zeros((len(ratios), 1))
+        self.tables = np.hstack([zero, np.cumsum(rows * _STEP_M, axis=1)])  # (R, U + 1)
+
+    def _integral(self, at: FloatArray) -> FloatArray:
+        """The tables' cumulative integrals (R, K) at positions ``at`` (K,) from E."""
+        first = self.u[0] - 0.5 * _STEP_M
+        where = np.clip((at - first) / _STEP_M, 0.0, len(self.u) - 1e-9)
+        k = where.astype(np.int64)
+        share = where - k
+        return np.asarray(self.tables[:, k] * (1.0 - share) + self.tables[:, k + 1] * share)
+
+    def run(self, ends: FloatArray) -> tuple[float, float]:
+        """(E, score) of the best of ``ends`` (their cap radius profiled out)."""
+        m = self.model
+        x = (self.p[None, :] - ends[:, None])[None, :, :]  # how far beyond each end, (1, E, M)
+        delta = m.distance(x, self.d[None, None, :], self.radii, self.round_cap)
+        log_p = np.log(m.profile(delta)).sum(axis=2)  # (R, E)
+        area = self._integral(m.stop - ends) - self._integral(m.start - ends)
+        mean = (log_p + self.fixed) / self.count
+        score = (mean - np.log(area)) * m.weight + self.prior[:, None]
+        r, k = np.unravel_index(int(np.argmax(score)), score.shape)
+        return float(ends[k]), float(score[r, k])

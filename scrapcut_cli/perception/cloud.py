@@ -4,7 +4,9 @@ The recipe of one frame (:func:`process_frame`), in order:
 
 1. colour filter (:func:`~scrapcut_cli.perception.paint.paint_pixel_indices`), then isolated
    paint pixels dropped (fewer than ``min_paint_neighbors`` of 4 neighbours in the range:
-   camera noise lifting single pixels of rust into the range);
+   camera noise lifting single pixels of rust into the range), then small blobs (8-connected
+   paint covering less than ``min_paint_area_m2`` of surface: overspray specks, which stitch
+   into a halo around the stroke and past its ends);
 2. depth gate: valid depth within ``[min_depth_m, max_depth_m]`` and no flying pixel (a depth
    that jumps by more than ``flying_pixel_ratio × depth`` to one of its 4-neighbours: the
    smeared pixels a stereo camera produces across depth edges);
@@ -30,7 +32,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.ndimage import maximum_filter
+from scipy.ndimage import label, maximum_filter
 from scipy.spatial import cKDTree
 
 from scrapcut_cli._open3d import o3d
@@ -41,9 +43,13 @@ from scrapcut_cli.recording.frame import CameraModel, Frame
 
 FloatArray = NDArray[np.float64]
 
+#: 8-connectivity of image blobs: specks touching at a corner are one blob.
+_EIGHT = np.ones((3, 3), dtype=bool)
+
 #: Why a frame contributed no paint points.
 SKIP_NO_PAINT = "no_paint"
-#: Pixels in the colour range, but only isolated ones (camera noise on rust, specks): no stroke.
+#: Pixels in the colour range, but only isolated ones or small blobs (camera noise on rust,
+#: overspray specks): no stroke.
 SKIP_SCATTERED_PAINT = "scattered_paint"
 SKIP_NO_VALID_DEPTH = "no_valid_depth"
 SKIP_TOO_LITTLE_PAINT = "too_little_paint"
@@ -112,6 +118,10 @@ def check_perception_config(config: PerceptionConfig) -> None:
     if config.surface_band_m < 0:
         raise PerceptionError(
             f"perception.surface_band_m must be >= 0, got {config.surface_band_m}"
+        )
+    if not config.min_paint_area_m2 >= 0:  # NaN fails too
+        raise PerceptionError(
+            f"perception.min_paint_area_m2 must be >= 0, got {config.min_paint_area_m2}"
         )
     if config.sor_neighbors < 0 or config.min_paint_points < 0:
         raise PerceptionError(
@@ -184,6 +194,54 @@ def reject_isolated_pixels(
     return pixels[count >= min_neighbors]
 
 
+def reject_small_blobs(
+    pixels: NDArray[np.intp],
+    depth_m: NDArray[np.float32],
+    camera: CameraModel,
+    *,
+    min_area_m2: float,
+    nearest_m: float,
+) -> NDArray[np.intp]:
+    """The subset of ``pixels`` (ascending flat indices into the (H, W) ``depth_m`` image) in
+    8-connected blobs covering at least ``min_area_m2`` of surface.
+
+    A blob's area is its pixel count times the footprint of a pixel at the blob's RMS depth,
+    z^2 / (fx fy), metres^2 (seen face-on; an oblique surface looks smaller). Overspray
+    specks are drops a few millimetres across, separate from the stroke in the image; a stroke,
+    even a sliver at the image's edge or the paint on one wire of a mesh, covers far more.
+    Blobs whose pixels have no valid depth are kept (their size is unknown; the depth gate
+    decides). Only blobs small enough to be under the limit at ``nearest_m`` (the nearest
+    usable depth) have their depth looked up. ``min_area_m2 = 0`` keeps all.
+    """
+    if min_area_m2 <= 0 or pixels.size == 0:
+        return pixels
+    width = depth_m.shape[1]
+    # scipy's labelling is the costly step (0.65 ms for a whole 640x480 frame), so it runs on
+    # the rows the paint spans only (the pixels are sorted); the rest is on the paint pixels.
+    first = int(pixels[0]) // width * width
+    rows = int(pixels[-1]) // width - first // width + 1
+    mask = np.zeros(rows * width, dtype=bool)
+    mask[pixels - first] = True
+    labels, n = label(mask.reshape(rows, width), structure=_EIGHT)
+    if n <= 1:
+        return pixels
+    blob = labels.reshape(-1)[pixels - first]
+    count = np.bincount(blob, minlength=n + 1)
+    footprint = 1.0 / (camera.fx * camera.fy)  # pixel area per metre^2 of depth^2
+    small = count * (max(nearest_m, 1e-3) ** 2 * footprint) < min_area_m2
+    candidate = small[blob]
+    if not candidate.any():
+        return pixels
+    z = np.take(depth_m.reshape(-1), pixels[candidate]).astype(np.float64)
+    which = blob[candidate]
+    valid = np.isfinite(z) & (z > 0.0)
+    z2 = np.bincount(which[valid], weights=z[valid] ** 2, minlength=n + 1)
+    seen = np.bincount(which[valid], minlength=n + 1)
+    area = count * z2 / np.maximum(seen, 1) * footprint
+    drop = small & (seen > 0) & (area < min_area_m2)
+    return pixels[~drop[blob]]
+
+
 def backproject_pixels(
     camera: CameraModel,
     depth_m: NDArray[np.float32],
@@ -221,9 +279,7 @@ def backproject_paint(
         Pixels in the colour range before the depth gate.
     """
     paint = paint_pixel_indices(frame.color, hsv)
-    solid = reject_isolated_pixels(
-        paint, frame.depth.shape, min_neighbors=config.min_paint_neighbors
-    )
+    solid = _solid_paint(frame, paint, config)
     usable = usable_depth_pixels(
         frame.depth,
         solid,
@@ -235,6 +291,22 @@ def backproject_paint(
         backproject_pixels(frame.camera, frame.depth, usable, frame.T_base_cam),
         usable,
         int(paint.size),
+    )
+
+
+def _solid_paint(
+    frame: Frame, paint: NDArray[np.intp], config: PerceptionConfig
+) -> NDArray[np.intp]:
+    """The colour filter's pixels without isolated pixels and small blobs (step 1)."""
+    solid = reject_isolated_pixels(
+        paint, frame.depth.shape, min_neighbors=config.min_paint_neighbors
+    )
+    return reject_small_blobs(
+        solid,
+        frame.depth,
+        frame.camera,
+        min_area_m2=config.min_paint_area_m2,
+        nearest_m=config.min_depth_m,
     )
 
 
@@ -348,13 +420,10 @@ def process_frame(frame: Frame, hsv: HsvRange, config: PerceptionConfig) -> Fram
     if paint_pixels == 0:
         return skipped(SKIP_NO_PAINT, 0, 0)
     if len(points) == 0:
-        # Scattered specks (rust lifted into the range by noise) and paint without usable depth
-        # need different remedies; telling them apart costs a second filter on skipped frames only.
-        solid = reject_isolated_pixels(
-            paint_pixel_indices(frame.color, hsv),
-            frame.depth.shape,
-            min_neighbors=config.min_paint_neighbors,
-        )
+        # Scattered specks (rust lifted into the range by noise, overspray) and paint without
+        # usable depth need different remedies; telling them apart costs a second filter on
+        # skipped frames only.
+        solid = _solid_paint(frame, paint_pixel_indices(frame.color, hsv), config)
         return skipped(SKIP_NO_VALID_DEPTH if solid.size else SKIP_SCATTERED_PAINT, paint_pixels, 0)
     paint = remove_statistical_outliers(
         voxel_downsample(points, config.voxel_size_m),
@@ -425,8 +494,8 @@ class PerceptionTally:
         hints = []
         if self.skip_reasons[SKIP_SCATTERED_PAINT]:
             hints.append(
-                f"scattered pixels are no stroke ({hues}): try --paint, --hsv H1,H2,S,V "
-                "or --min-paint-neighbors"
+                f"scattered pixels are no stroke ({hues}): try --paint, --hsv H1,H2,S,V, "
+                "--min-paint-neighbors or a smaller perception.min_paint_area_m2 (--config)"
             )
         if self.skip_reasons[SKIP_NO_VALID_DEPTH]:
             hints.append("check the depth range (--min-depth-mm/--max-depth-mm)")
