@@ -217,15 +217,18 @@ def reject_small_blobs(
         return pixels
     width = depth_m.shape[1]
     # scipy's labelling is the costly step (0.65 ms for a whole 640x480 frame), so it runs on
-    # the rows the paint spans only (the pixels are sorted); the rest is on the paint pixels.
-    first = int(pixels[0]) // width * width
-    rows = int(pixels[-1]) // width - first // width + 1
-    mask = np.zeros(rows * width, dtype=bool)
-    mask[pixels - first] = True
-    labels, n = label(mask.reshape(rows, width), structure=_EIGHT)
+    # the box the paint spans only (the pixels are sorted by row); the rest is on the paint.
+    row = pixels // width
+    col = pixels - row * width
+    r0, c0 = int(row[0]), int(col.min())
+    box_w = int(col.max()) - c0 + 1
+    local = (row - r0) * box_w + (col - c0)
+    mask = np.zeros((int(row[-1]) - r0 + 1) * box_w, dtype=bool)
+    mask[local] = True
+    labels, n = label(mask.reshape(-1, box_w), structure=_EIGHT)
     if n <= 1:
         return pixels
-    blob = labels.reshape(-1)[pixels - first]
+    blob = labels.reshape(-1)[local]
     count = np.bincount(blob, minlength=n + 1)
     footprint = 1.0 / (camera.fx * camera.fy)  # pixel area per metre^2 of depth^2
     small = count * (max(nearest_m, 1e-3) ** 2 * footprint) < min_area_m2
