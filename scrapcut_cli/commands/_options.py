@@ -13,6 +13,11 @@ from scrapcut_cli.config import ScrapcutConfig, load_config
 F = TypeVar("F", bound=Callable[..., Any])
 
 
+def mm_to_m(value: float | None) -> float | None:
+    """An option given in millimetres, in metres (``None``: not given)."""
+    return None if value is None else value / 1000.0
+
+
 def config_option(f: F) -> F:
     """``--config FILE``: a TOML file of stage parameters (see ``scrapcut_cli.config``)."""
     return click.option(

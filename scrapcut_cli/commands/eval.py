@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from scrapcut_cli.commands._console import err, out
+from scrapcut_cli.commands._console import err, print_table
 from scrapcut_cli.commands._options import build_config, config_option
 
 if TYPE_CHECKING:
@@ -115,7 +115,7 @@ def eval_cmd(
     table = rich_table(rows, paper=table1, title="Path error (Table I)")
 
     if fmt == "table" and output is None:
-        show_table(table)
+        print_table(table)
     else:
         if fmt == "table":
             text = _plain_table(table)
@@ -129,24 +129,11 @@ def eval_cmd(
             click.echo(text, nl=False)
         else:
             write_text_atomic(output, text)
-            show_table(table)
+            print_table(table)
             err.print(f"wrote {output}")
     if plot_dir is not None:
         written = write_plots(rows, plot_dir)
         err.print(f"wrote {len(written)} figure(s) to {plot_dir}/")
-
-
-def show_table(table: Table) -> None:
-    """Print a report table on stdout at its natural width, even in a narrow terminal or a
-    pipe: a figure cut to "3.0…" would be worse than a wrapped line."""
-    from rich.console import Console
-    from rich.measure import Measurement
-
-    natural = Measurement.get(out, out.options.update_width(1000), table)
-    if natural.maximum <= out.width:
-        out.print(table)
-    else:
-        Console(width=natural.maximum, highlight=False).print(table)
 
 
 def _plain_table(table: Table) -> str:

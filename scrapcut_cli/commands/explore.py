@@ -11,6 +11,7 @@ import click
 from scrapcut_cli.commands._options import (
     build_config,
     config_option,
+    mm_to_m,
     paint_options,
     recording_options,
 )
@@ -19,10 +20,6 @@ if TYPE_CHECKING:
     from scrapcut_cli.exploration.replay import ExplorationRun
 
 METHODS = ("nurbs", "skeleton")
-
-
-def _mm(value: float | None) -> float | None:
-    return None if value is None else value / 1000.0
 
 
 @click.command("explore")
@@ -180,9 +177,9 @@ def explore(
                 "exploration",
                 method=method,
                 delta_size=delta_size,
-                step_m=_mm(step_mm),
-                min_distance_m=_mm(min_distance_mm),
-                max_distance_m=_mm(max_distance_mm),
+                step_m=mm_to_m(step_mm),
+                min_distance_m=mm_to_m(min_distance_mm),
+                max_distance_m=mm_to_m(max_distance_mm),
                 max_steps=max_steps,
                 look_past=look_past,
             )

@@ -12,6 +12,7 @@ from scrapcut_cli.commands._options import (
     apply_stage_options,
     build_config,
     config_option,
+    mm_to_m,
     paint_options,
     perception_options,
     recording_options,
@@ -20,10 +21,6 @@ from scrapcut_cli.commands._options import (
 )
 
 METHODS = ("nurbs", "skeleton")
-
-
-def _mm(value: float | None) -> float | None:
-    return None if value is None else value / 1000.0
 
 
 @click.command("fit")
@@ -182,20 +179,20 @@ def fit(
 
     stage, shared = split_stage_options(shared)
     config = apply_stage_options(build_config(config_path, **shared), stage)
-    config = config.override("skeleton", leaf_size_m=_mm(leaf_size_mm))
+    config = config.override("skeleton", leaf_size_m=mm_to_m(leaf_size_mm))
     config = config.override(
         "nurbs", smoothness=smoothness, control_points=control_points, degree=degree
     )
     config = config.override(
         "toolpath",
-        spacing_m=_mm(spacing_mm),
-        standoff_m=_mm(standoff_mm),
-        normal_radius_m=_mm(normal_radius_mm),
+        spacing_m=mm_to_m(spacing_mm),
+        standoff_m=mm_to_m(standoff_mm),
+        normal_radius_m=mm_to_m(normal_radius_mm),
         material=material,
         thickness_mm=thickness_mm,
         max_tilt_deg=max_tilt_deg,
-        torch_length_m=_mm(torch_length_mm),
-        torch_radius_m=_mm(torch_radius_mm),
+        torch_length_m=mm_to_m(torch_length_mm),
+        torch_radius_m=mm_to_m(torch_radius_mm),
         speed_table=None if speed_table is None else str(speed_table),
     )
 

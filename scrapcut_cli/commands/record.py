@@ -7,15 +7,11 @@ from typing import Any
 
 import click
 
-from scrapcut_cli.commands._options import build_config, config_option, paint_options
+from scrapcut_cli.commands._options import build_config, config_option, mm_to_m, paint_options
 
 MODES = ("sweep", "survey", "explore")
 NOISES = ("ideal", "d435i", "yard")
 METHODS = ("nurbs", "skeleton")
-
-
-def _mm(value: float | None) -> float | None:
-    return None if value is None else value / 1000.0
 
 
 @click.command("record")
@@ -153,8 +149,8 @@ def record(
         height=height,
         views=views,
         frames_per_view=frames_per_view,
-        stroke_width_m=_mm(stroke_width_mm),
-        view_distance_m=_mm(distance_mm),
+        stroke_width_m=mm_to_m(stroke_width_mm),
+        view_distance_m=mm_to_m(distance_mm),
         start_fraction=start_fraction,
         depth_encoding=depth_encoding,
     )

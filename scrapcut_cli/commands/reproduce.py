@@ -123,8 +123,7 @@ def reproduce(
     Writes DIR/ with the recordings, path files, report.md, report.json, report.csv, plots/
     and the configuration used (config.toml works as --config).
     """
-    from scrapcut_cli.commands._console import progress
-    from scrapcut_cli.commands.eval import show_table
+    from scrapcut_cli.commands._console import print_table, progress
     from scrapcut_cli.evaluation.report import load_paper_table, rich_table
     from scrapcut_cli.evaluation.reproduce import check_out_dir, resolve_methods, resolve_objects
     from scrapcut_cli.evaluation.reproduce import reproduce as run_reproduce
@@ -171,7 +170,7 @@ def reproduce(
             if sys.argv and Path(sys.argv[0]).name == "scrapcut"
             else "scrapcut reproduce",
         )
-    show_table(rich_table(result.rows, paper=load_paper_table(), title="Table I (ours vs paper)"))
+    print_table(rich_table(result.rows, paper=load_paper_table(), title="Table I (ours vs paper)"))
     failed = [r for r in result.rows if r.failure]
     if failed:
         err.print(f"[yellow]{len(failed)} row(s) failed; see the Note column[/yellow]")
