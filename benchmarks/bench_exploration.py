@@ -10,8 +10,13 @@ camera travel and collisions come from the simulator; coverage and errors from t
 of the stitched paint against the painted reference (Table I's metric). A skeleton that breaks
 into pieces at 5 mm is refitted at 20 mm, as the paper did for the basket (marked "*").
 
+An end decided without a view past it, because an earlier frame observed it (no view was
+feasible), reads ``endpoint@fK`` (frame K saw it). ``--no-other-side-views`` turns off views
+from a surface's other side (tried before giving an end up), to see that evidence at work.
+
 Run: ``.venv/bin/python benchmarks/bench_exploration.py [--objects cylinder,slanted]
-[--methods nurbs] [--repeats 3] [--width 640 --height 480] [--keep DIR]``.
+[--methods nurbs] [--repeats 3] [--width 640 --height 480] [--keep DIR]
+[--no-other-side-views]``.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -59,6 +65,11 @@ def main() -> None:
     parser.add_argument(
         "--no-side-starts", action="store_true", help="skip the slanted one-face starts"
     )
+    parser.add_argument(
+        "--no-other-side-views",
+        action="store_true",
+        help="never view a surface from its other side (exploration.other_side_views=false)",
+    )
     args = parser.parse_args()
 
     out_dir = args.keep or Path(tempfile.mkdtemp(prefix="bench_exploration_"))
@@ -69,12 +80,12 @@ def main() -> None:
         "replays [ms]"
     )
     header = (
-        f"{'object':<12} {'method':<9}{'views':>5} {'ends':<19} {'cover':>6} {'mean':>6} "
+        f"{'object':<12} {'method':<9}{'views':>5} {'ends':<24} {'cover':>6} {'mean':>6} "
         f"{'max':>6} {'travel':>7} {'coll':>4} {'m.coll':>6} {'planner':>8} {'p90':>6} "
         f"{'+percept.':>9} {'log':>5}"
     )
     units = (
-        f"{'':<12} {'':<9}{'':>5} {'':<19} {'%':>6} {'mm':>6} {'mm':>6} {'m':>7} {'':>4} "
+        f"{'':<12} {'':<9}{'':>5} {'':<24} {'%':>6} {'mm':>6} {'mm':>6} {'m':>7} {'':>4} "
         f"{'':>6} {'ms':>8} {'ms':>6} {'ms':>9} {'':>5}"
     )
     print(header)
@@ -82,7 +93,9 @@ def main() -> None:
     all_planner: list[float] = []
     for name in args.objects.split(","):
         for method in args.methods.split(","):
-            config = ScrapcutConfig().override("exploration", method=method)
+            config = ScrapcutConfig().override(
+                "exploration", method=method, other_side_views=not args.no_other_side_views
+            )
             sim = SimConfig(
                 object=name,
                 mode="explore",
@@ -107,9 +120,9 @@ def main() -> None:
             curve, mark = _global_fit(run.paint_points, method, replace(config))
             reference = run_reference(path)
             error = path_error(curve.points, reference)  # type: ignore[attr-defined]
-            ends = "+".join(e["reason"] for e in run.ends) or "-"
+            ends = ends_text(run.ends)
             print(
-                f"{name:<12} {method + mark:<9}{result.views:>5} {ends:<19} "
+                f"{name:<12} {method + mark:<9}{result.views:>5} {ends:<24} "
                 f"{100 * error.coverage:>6.1f} {1000 * error.mean_m:>6.2f} "
                 f"{1000 * error.max_m:>6.2f} {result.camera_travel_m:>7.2f} "
                 f"{result.collisions:>4} {result.motion_collisions:>6} "
@@ -141,12 +154,15 @@ def side_starts(args: argparse.Namespace, out_dir: Path) -> None:
 
     print()
     print("slanted from one face (the paper's real-robot start): look past the ridge or not")
-    print(f"{'start':>6} {'method':<9}{'look past':>9} {'views':>5} {'ends':<19} {'cover':>6}")
+    print(f"{'start':>6} {'method':<9}{'look past':>9} {'views':>5} {'ends':<24} {'cover':>6}")
     for start in (0.15, 0.85):
         for method in args.methods.split(","):
             for look_past in (True, False):
                 config = ScrapcutConfig().override(
-                    "exploration", method=method, look_past=look_past
+                    "exploration",
+                    method=method,
+                    look_past=look_past,
+                    other_side_views=not args.no_other_side_views,
                 )
                 sim = SimConfig(
                     object="slanted",
@@ -177,11 +193,20 @@ def side_starts(args: argparse.Namespace, out_dir: Path) -> None:
                 run = replay_exploration(path)
                 curve, mark = _global_fit(run.paint_points, method, config)
                 error = path_error(curve.points, run_reference(path))  # type: ignore[attr-defined]
-                ends = "+".join(e["reason"] for e in run.ends) or "-"
+                ends = ends_text(run.ends)
                 print(
                     f"{start:>6.2f} {method + mark:<9}{'on' if look_past else 'off':>9} "
-                    f"{result.views:>5} {ends:<19} {100 * error.coverage:>6.1f}"
+                    f"{result.views:>5} {ends:<24} {100 * error.coverage:>6.1f}"
                 )
+
+
+def ends_text(ends: list[dict[str, Any]]) -> str:
+    """``reason+reason`` of the two directions; ``@fK`` marks an end frame K observed."""
+    parts = []
+    for e in ends:
+        seen = e.get("observed_by")
+        parts.append(e["reason"] + ("" if seen is None else f"@f{seen['frame']}"))
+    return "+".join(parts) or "-"
 
 
 def run_reference(path: Path) -> np.ndarray:

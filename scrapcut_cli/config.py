@@ -211,6 +211,15 @@ class ExplorationConfig:
     look_past_angles_deg: tuple[float, ...] = (60.0, 90.0, 40.0)  # view tilts about the edge
     edge_probe_m: float = 0.025  # surface must continue this far beyond a confirmed end
     turn_angle_deg: float = 45.0  # the fitted curve turning more near its end: look past
+    # No view past an end from the normal's side: try the surface's other side (a mesh, a sheet)
+    other_side_views: bool = True
+    # Still no view: the end counts if an earlier frame observed it (exploration.evidence):
+    # tip and continuation (edge_probe_m past it) this share of the image inside the border,
+    # judged on depth windows of this radius with this tolerance.
+    observed_end: bool = True
+    observed_end_margin: float = 0.05
+    observed_end_window_m: float = 0.006
+    observed_end_tolerance_m: float = 0.01
 
 
 @dataclass(frozen=True)

@@ -22,11 +22,13 @@ from scrapcut_cli.exploration.decision import ViewPlanner
 from scrapcut_cli.exploration.planner import (
     LOG_SCHEMA,
     ExplorationPlanner,
+    Observation,
     pose_from_dict,
     thin_points,
 )
 from scrapcut_cli.fitting import fit_curve
 from scrapcut_cli.geometry import look_at
+from scrapcut_cli.perception.cloud import FrameClouds
 from scrapcut_cli.perception.paint import PAINT_PRESETS
 
 ORANGE = PAINT_PRESETS["orange"].hsv
@@ -161,6 +163,101 @@ def test_no_reachable_view_ends_both_directions_with_the_reason() -> None:
     assert planner.endpoints_found == 0
     logged = loop.log[0]["reachability"]
     assert len(logged) == len(asked) > 0 and not any(q["ok"] for q in logged)
+    # The line runs out of the image both ways: its ends were not observed either.
+    evidence = loop.log[0]["end_evidence"]
+    assert [e["direction"] for e in evidence] == [0, 1]
+    assert not any(e["observed"] for e in evidence)
+    assert [e["frames"][0]["verdict"] for e in evidence] == ["tip outside", "tip outside"]
+    assert all("observed_by" not in e for e in planner.ends)
+
+
+def test_ends_seen_in_the_first_view_count_when_no_view_past_them_is_feasible() -> None:
+    """A 12 cm line wholly in the initial view on a pipe that goes on past both its ends: the
+    robot can reach nothing, but the first frame saw the pipe's bare surface past each end."""
+    scan = CylinderScan(length_m=0.12)
+
+    def never(T: np.ndarray) -> bool:
+        return False
+
+    planner = ExplorationPlanner(scan.initial_view, reachable=never, hsv=ORANGE)
+    loop = explore(planner, scan)
+    assert len(loop.frames) == 1
+    assert planner.stop_reason == "done" and planner.endpoints_found == 2
+    assert [e["reason"] for e in planner.ends] == ["endpoint", "endpoint"]
+    for end in planner.ends:
+        assert end["observed_by"] == {"frame": 0, "k": 0, "how": "surface"}
+    tips = sorted(e["tip"][0] for e in planner.ends)
+    assert tips == pytest.approx([-0.06, 0.06], abs=0.012)  # the paint's true ends
+    evidence = json.loads(json.dumps(loop.log[0]["end_evidence"]))  # JSON-ready
+    assert all(e["observed"] and e["frame"] == 0 for e in evidence)
+    assert all(e["border_px"] >= 0.05 * scan.height for e in evidence)
+    assert evidence[0]["why"] == "the surface goes on past the tip without paint"
+    # Without the evidence the same run ends both directions with no_feasible_view.
+    off = ExplorationPlanner(
+        scan.initial_view, reachable=never, hsv=ORANGE, config=_config(observed_end=False)
+    )
+    explore(off, CylinderScan(length_m=0.12))
+    assert [e["reason"] for e in off.ends] == ["no_feasible_view", "no_feasible_view"]
+    assert off.endpoints_found == 0
+
+
+@pytest.mark.slow
+def test_an_end_behind_an_occluding_ridge_is_not_an_observed_end() -> None:
+    """The slanted piece seen square to its first face, the ridge well inside the image: the
+    line goes on down the hidden face, so with no feasible view its end there must stay
+    ``no_feasible_view`` (and the other end, where the line leaves the image, too)."""
+    scan = ObjectScan("slanted", noise="d435i", width=160, height=120)
+    face = np.array([0.0, -0.22, 0.12]) / np.hypot(0.22, 0.12)  # the -y face's normal
+    up_face = scan.reference[: len(scan.reference) // 2]
+    on_face = up_face[np.argmin(np.abs(up_face[:, 2] - 0.17))]
+    scan.initial_view = look_at(on_face + 0.3 * face, on_face, up_hint=(0.0, 0.0, 1.0))
+
+    def never(T: np.ndarray) -> bool:
+        return False
+
+    planner = ExplorationPlanner(scan.initial_view, reachable=never, hsv=ORANGE)
+    loop = explore(planner, scan)
+    assert [e["reason"] for e in planner.ends] == ["no_feasible_view", "no_feasible_view"]
+    assert planner.endpoints_found == 0
+    ridge, low = loop.log[0]["end_evidence"]
+    assert np.asarray(planner.ends[0]["tip"])[2] > 0.2  # at the 0.22 m ridge
+    check = ridge["frames"][0]
+    assert check["border_px"] > 0.2 * scan.camera.height  # well inside the image
+    assert check["verdict"].endswith("through")  # past the ridge: the floor
+    # The folds the far face could take are hidden behind the ridge.
+    assert check["folds_deg"]["90"] == check["folds_deg"]["135"] == "occluded"
+    assert low["frames"][0]["verdict"] == "tip outside"
+
+
+def test_a_sheet_blocked_on_its_seen_side_is_viewed_from_its_other_side() -> None:
+    """A painted mesh wall (y = 0) seen from +y with observed obstacles all over that side:
+    no view along its normal, the camera's axis or from above; from behind the wall (-y) the
+    map is clear, so that view is asked (and taken) before the direction is given up."""
+    g = np.arange(0.40, 0.6001, 0.004)
+    x, z = np.meshgrid(g, g - 0.3)
+    wall = np.column_stack([x.ravel(), np.zeros(x.size), z.ravel()])
+    band = wall[(np.abs(wall[:, 0] - 0.5) <= 0.01) & (np.abs(wall[:, 2] - 0.2) <= 0.05)]
+    surface = wall[(np.abs(wall[:, 0] - 0.5) > 0.01) & (np.abs(wall[:, 2] - 0.2) <= 0.08)]
+    c = np.arange(0.0, 0.6001, 0.01)
+    cx, cy, cz = np.meshgrid(c + 0.2, c[(c >= 0.07) & (c <= 0.3)], c, indexing="ij")
+    cage = np.column_stack([cx.ravel(), cy.ravel(), cz.ravel()])
+    T = look_at([0.5, 0.3, 0.2], [0.5, 0.0, 0.2], up_hint=(0.0, 0.0, 1.0))
+    clouds = FrameClouds(0, 1, band, surface, len(band), len(band), T)
+    seen = Observation(0, 1, T, clouds, np.vstack([wall, cage]))
+    decisions = {}
+    for other_side in (True, False):
+        planner = ExplorationPlanner(
+            T, reachable=_always, hsv=ORANGE, config=_config(other_side_views=other_side)
+        )
+        planner.start()
+        decisions[other_side] = planner.observe_perceived(seen)
+    taken = decisions[True]
+    assert taken.reason == "extrapolate" and taken.info["view_axis"] == "other_side"
+    assert taken.T_base_cam is not None and taken.T_base_cam[1, 3] < -0.1  # behind the wall
+    assert taken.T_base_cam[1, 2] > 0.5  # looking at it along +y
+    # Without it: both directions end, unseen (no depth was kept for evidence).
+    refused = decisions[False]
+    assert refused.stop and refused.reason == "no_feasible_view"
 
 
 def test_the_step_budget_stops_the_run() -> None:

@@ -93,6 +93,48 @@ def test_a_changed_reachability_answer_changes_the_plan(
     assert any("reachability query the log does not have" in d for d in run.divergences)
 
 
+def test_an_end_observed_without_a_feasible_view_replays_with_its_evidence(
+    tmp_path: Path,
+) -> None:
+    scan = CylinderScan(length_m=0.12)  # wholly in the first view; nothing is reachable
+    planner = ExplorationPlanner(scan.initial_view, reachable=lambda T: False, hsv=ORANGE)
+    loop = explore(planner, scan)
+    assert [e.get("observed_by", {}).get("how") for e in planner.ends] == ["surface"] * 2
+    path = tmp_path / "seen.mcap"
+    write_exploration_recording(path, loop.frames, loop.log, reference=scan.reference)
+    run = replay_exploration(path)
+    assert run.matches, run.divergences
+    assert run.endpoints_found == 2 and run.ends == planner.ends
+    # A log claiming another frame saw the end is a divergence.
+    evidence = json.loads(json.dumps(loop.log[0]["end_evidence"]))
+    evidence[1]["frame"] = 3
+    bad = _tampered(path, loop, tmp_path / "claimed.mcap", 0, end_evidence=evidence)
+    run = replay_exploration(bad)
+    assert [d for d in run.divergences if "end evidence" in d] == [
+        "step 0: end evidence [(0, True, 0, 'surface'), (1, True, 0, 'surface')], "
+        "log [(0, True, 0, 'surface'), (1, True, 3, 'surface')]"
+    ]
+
+
+def test_a_log_from_before_the_evidence_replays_without_it(tmp_path: Path) -> None:
+    """Logs written before ``other_side_views`` and ``observed_end`` existed ran without
+    them; their replay must too (the defaults would change the decisions)."""
+    scan = CylinderScan(length_m=0.12)
+    old = ScrapcutConfig().override("exploration", other_side_views=False, observed_end=False)
+    planner = ExplorationPlanner(
+        scan.initial_view, reachable=lambda T: False, hsv=ORANGE, config=old
+    )
+    loop = explore(planner, scan)
+    log = json.loads(json.dumps(loop.log))
+    for key in ("other_side_views", "observed_end"):
+        del log[0]["config"]["exploration"][key]
+    path = tmp_path / "old.mcap"
+    write_exploration_recording(path, loop.frames, log, reference=scan.reference)
+    run = replay_exploration(path)
+    assert run.matches, run.divergences
+    assert [e["reason"] for e in run.ends] == ["no_feasible_view", "no_feasible_view"]
+
+
 def test_replay_needs_the_log_and_the_logged_method(
     explored: tuple[Path, LoopResult], tmp_path: Path
 ) -> None:

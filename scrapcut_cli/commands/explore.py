@@ -263,7 +263,14 @@ def _render(run: ExplorationRun) -> None:
     summary = Table(show_header=False, title="summary")
     summary.add_column("", style="bold")
     summary.add_column("")
-    ends = ", ".join(f"{e['reason']}" for e in run.ends) or "-"
+    ends = (
+        ", ".join(
+            e["reason"]
+            + (f" seen in frame {e['observed_by']['frame']}" if "observed_by" in e else "")
+            for e in run.ends
+        )
+        or "-"
+    )
     rows = [
         (
             "views",

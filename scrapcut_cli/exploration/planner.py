@@ -24,7 +24,8 @@ so the same frames and the same reachability answers give the same decisions, wh
    ``min_elevation_deg``); the distance from ``min_distance_m`` upward and the roll about the
    axis searched until the camera and hand clear the occupancy map, the target and the known
    tip are in sight and deep enough for the camera, and ``reachable(T)`` says yes. Only if the
-   normal gives no view are the last viewing direction and straight down tried.
+   normal gives no view are the last viewing direction, straight down and then the surface's
+   other side (``other_side_views``: a mesh or a sheet seen from behind) tried.
 
 Stopping: growth(k) <= ``delta_size`` ends a direction. Before declaring an endpoint there, the
 planner checks that the observed surface goes on past the curve's end in a fan of directions (a
@@ -35,7 +36,13 @@ from a view tilted about the edge (``look_past_angles_deg``). A next target with
 positions; it counts as an endpoint). After the first end the camera returns to the initial view
 and explores the other direction; the second end stops the run ("done"). A run also stops, with
 the reason, on the step budget; a direction also ends when no view is feasible, the paint is
-lost or the fit fails.
+lost or the fit fails. When no view past an end is feasible, the end still counts as an
+endpoint if a frame taken so far observed it (``observed_end``,
+:mod:`~scrapcut_cli.exploration.evidence`: the tip well inside that image and the depth past
+it showing bare surface, or the surface ending in sight, not the image border or an occluding
+edge); the evidence, for or against, is logged with the step (``end_evidence``) and the end's
+entry names the frame (``observed_by``). Otherwise the direction ends with
+``no_feasible_view``.
 
 Every decision carries its log entry (``Decision.info``, JSON-ready): k, frame, growth, size,
 endpoints found, the executed pose (the frame's) and the planned one, the reason, and every
@@ -58,6 +65,7 @@ from scrapcut_cli import __version__
 from scrapcut_cli.config import ScrapcutConfig, SkeletonConfig
 from scrapcut_cli.errors import ExplorationError, FittingError, PerceptionError
 from scrapcut_cli.exploration.decision import Decision, Reachability, ViewPlanner
+from scrapcut_cli.exploration.evidence import DepthView, EndEvidence, depth_view, end_evidence
 from scrapcut_cli.exploration.occupancy import OccupancyMap, depth_points
 from scrapcut_cli.exploration.views import (
     UP,
@@ -143,6 +151,9 @@ class Observation:
         Observed depth points for the occupancy map, metres, base frame.
     base_frame : str
         TF frame of every coordinate.
+    depth : DepthView or None
+        The frame's pose, camera and strided usable depth, kept to tell later whether it
+        observed a line's end (:mod:`~scrapcut_cli.exploration.evidence`); None: not kept.
     """
 
     frame_index: int
@@ -151,6 +162,7 @@ class Observation:
     clouds: FrameClouds
     obstacles_base: FloatArray
     base_frame: str = "panda_link0"
+    depth: DepthView | None = None
 
 
 def perceive(frame: Frame, hsv: HsvRange, config: ScrapcutConfig) -> Observation:
@@ -165,6 +177,14 @@ def perceive(frame: Frame, hsv: HsvRange, config: ScrapcutConfig) -> Observation
         max_depth_m=p.max_depth_m,
         flying_pixel_ratio=p.flying_pixel_ratio,
     )
+    kept = None
+    if config.exploration.observed_end:
+        kept = depth_view(
+            frame,
+            min_depth_m=p.min_depth_m,
+            max_depth_m=p.max_depth_m,
+            flying_pixel_ratio=p.flying_pixel_ratio,
+        )
     return Observation(
         frame_index=frame.index,
         stamp_ns=frame.stamp_ns,
@@ -172,6 +192,7 @@ def perceive(frame: Frame, hsv: HsvRange, config: ScrapcutConfig) -> Observation
         clouds=clouds,
         obstacles_base=obstacles,
         base_frame=frame.base_frame,
+        depth=kept,
     )
 
 
@@ -215,6 +236,8 @@ def check_exploration_config(config: ScrapcutConfig) -> None:
         "roll_step_deg": c.roll_step_deg,
         "occupancy_voxel_m": c.occupancy_voxel_m,
         "edge_probe_m": c.edge_probe_m,
+        "observed_end_window_m": c.observed_end_window_m,
+        "observed_end_tolerance_m": c.observed_end_tolerance_m,
     }
     for name, value in positive.items():
         if not (np.isfinite(value) and value > 0):
@@ -235,6 +258,10 @@ def check_exploration_config(config: ScrapcutConfig) -> None:
         raise ExplorationError(
             f"exploration.max_distance_m ({c.max_distance_m}) is below min_distance_m "
             f"({c.min_distance_m})"
+        )
+    if not 0 <= c.observed_end_margin < 0.5:
+        raise ExplorationError(
+            f"exploration.observed_end_margin must be within [0, 0.5), got {c.observed_end_margin}"
         )
     if c.roll_step_deg > 180:
         raise ExplorationError(f"exploration.roll_step_deg must be <= 180, got {c.roll_step_deg}")
@@ -354,6 +381,9 @@ class ExplorationPlanner:
         self._fit_s = 0.0
         self._last_pose = self.initial_view.copy()
         self._surface_cache: tuple[FloatArray, FloatArray] | None = None
+        self._depth_views: list[DepthView] = []
+        self._depth_steps: list[int] = []
+        self._evidence_notes: list[dict[str, Any]] = []
 
     @property
     def total(self) -> int:
@@ -393,6 +423,10 @@ class ExplorationPlanner:
         self.size += growth
         k = self._k
         self._k += 1
+        if obs.depth is not None:
+            self._depth_views.append(obs.depth)
+            self._depth_steps.append(k)
+        self._evidence_notes = []
         self._queries = []
         self._reach_s = 0.0
         self._fit_note = {}
@@ -432,10 +466,14 @@ class ExplorationPlanner:
         frontier = decision.info.get("end")
         if frontier is not None:
             info["end"] = frontier
+        if "view_axis" in decision.info:
+            info["view_axis"] = decision.info["view_axis"]
         if self._fit_note:
             info["fit"] = dict(self._fit_note)
         if self._look_note:
             info["look_past"] = dict(self._look_note)
+        if self._evidence_notes:
+            info["end_evidence"] = [dict(e) for e in self._evidence_notes]
         if decision.stop:
             info["ends"] = [dict(e) for e in self.ends]
         if k == 0:
@@ -526,9 +564,11 @@ class ExplorationPlanner:
         is the inverse surface normal there. Where observed surface rises across the line's way
         (a concave corner: the line runs into a flange), the first target is half a step up
         that wall, seen from over the known line (the corner's bisector). Only when no target
-        can be seen along its normal are the camera's last viewing direction and straight down
-        tried (a wire mesh seen from inside has its normal pointing inwards, where the hand
-        does not fit).
+        can be seen along its normal are the camera's last viewing direction, straight down and
+        the surface's other side tried (a wire mesh seen from inside has its normal pointing
+        inwards, where the hand does not fit; from outside it is open). With no view at all,
+        the end counts if an earlier frame observed it (:meth:`_observed_end`), else the
+        direction ends with ``no_feasible_view``.
         """
         c = self.config.exploration
         self._frontier = end
@@ -546,16 +586,27 @@ class ExplorationPlanner:
                     return self._end_direction("revisit")
                 candidates = candidates[:tried]
                 break
+        camera_axis = unit(-self._last_pose[:3, 2])
         axes: list[tuple[str, FloatArray | None]] = [
             ("normal", None),
-            ("camera", unit(-self._last_pose[:3, 2])),
+            ("camera", camera_axis),
             ("up", UP),
         ]
+        if c.other_side_views:
+            axes.append(("other_side", None))
         for axis_name, axis in axes:
             for fraction, target, normal in candidates:
-                outward = normal if axis is None else axis
-                if axis is not None and float(np.dot(unit(outward), normal)) > FALLBACK_COS:
-                    continue  # the same view as the normal's, tried already
+                if axis_name == "other_side":
+                    # The normal's sign comes from the cameras that saw the surface; a mesh or
+                    # a sheet seen from behind has a free side there. Inside a solid the map or
+                    # the robot refuses it. Skipped where the camera and up views were tried.
+                    outward = -normal
+                    if max(float(outward @ camera_axis), float(outward @ UP)) > FALLBACK_COS:
+                        continue
+                else:
+                    outward = normal if axis is None else axis
+                    if axis is not None and float(np.dot(unit(outward), normal)) > FALLBACK_COS:
+                        continue  # the same view as the normal's, tried already
                 T = self.find_view(target, outward, end.direction, keep_in_view=end.tip)
                 if T is not None:
                     self._visited.append(target)
@@ -566,7 +617,28 @@ class ExplorationPlanner:
                         "view_axis": axis_name,
                     }
                     return Decision(T, "extrapolate", info=info)
-        return self._end_direction("no_feasible_view")
+        evidence = self._observed_end(end)
+        if evidence is not None and evidence.observed:
+            return self._end_direction("endpoint", evidence=evidence)
+        return self._end_direction("no_feasible_view", evidence=evidence)
+
+    def _observed_end(self, end: _End) -> EndEvidence | None:
+        """Whether a frame taken so far observed the line's end at ``end`` (None when
+        ``observed_end`` is off or no depth was kept): see :mod:`.evidence`."""
+        c = self.config.exploration
+        if not c.observed_end or not self._depth_views:
+            return None
+        return end_evidence(
+            self._depth_views,
+            end.tip,
+            end.direction,
+            self._normal_at(end.tip, fallback=end.tip),
+            probe_m=c.edge_probe_m,
+            margin=c.observed_end_margin,
+            window_m=c.observed_end_window_m,
+            tolerance_m=c.observed_end_tolerance_m,
+            steps=self._depth_steps,
+        )
 
     def _rises_ahead(self, end: _End, normal: FloatArray) -> bool:
         """True when observed surface stands above the surface's plane around the tip: more
@@ -589,16 +661,27 @@ class ExplorationPlanner:
         ahead = (along > -WALL_BEHIND_M) & (along < c.step_m) & (across < WALL_HALF_WIDTH_M)
         return bool(np.any(ahead & (height > WALL_LIFT_M) & (height < WALL_HEIGHT_M)))
 
-    def _end_direction(self, reason: str) -> Decision:
-        """The direction being explored is finished: return for the other one, or stop."""
+    def _end_direction(self, reason: str, *, evidence: EndEvidence | None = None) -> Decision:
+        """The direction being explored is finished: return for the other one, or stop.
+
+        ``evidence``: whether an earlier frame observed the end (when no view past it was
+        feasible); logged with the step, and named in the end's entry when it counts.
+        """
         frontier = self._frontier
-        self.ends.append(
-            {
-                "direction": self._direction,
-                "reason": reason,
-                "tip": None if frontier is None else [float(v) for v in frontier.tip],
-            }
-        )
+        entry: dict[str, Any] = {
+            "direction": self._direction,
+            "reason": reason,
+            "tip": None if frontier is None else [float(v) for v in frontier.tip],
+        }
+        if evidence is not None:
+            self._evidence_notes.append({"direction": self._direction, **evidence.to_dict()})
+            if evidence.observed:
+                entry["observed_by"] = {
+                    "frame": evidence.frame,
+                    "k": evidence.k,
+                    "how": evidence.how,
+                }
+        self.ends.append(entry)
         if reason in ENDPOINT_REASONS:
             self.endpoints_found += 1
         if self._direction == 1:

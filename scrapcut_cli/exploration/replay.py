@@ -8,8 +8,9 @@ Two recipes, both returning an :class:`ExplorationRun`:
     the planner from the log's first entry (method, paint, every parameter, initial view),
     feeds it the logged frames (by image stamp), answers its reachability queries with the
     logged answers (:class:`RecordedAnswers`; the simulator is not needed) and compares every
-    decision with the log: growth, size, endpoints, action, reason, planned pose, and the
-    queries themselves. The planner is deterministic, so any difference is a divergence.
+    decision with the log: growth, size, endpoints, action, reason, planned pose, the end
+    evidence's verdicts (which frame observed an end, and how) and the queries themselves.
+    The planner is deterministic, so any difference is a divergence.
 
 :func:`what_if`
     On a dense recording (a ``survey`` in the simulator, or any real scan), the planner runs
@@ -68,6 +69,9 @@ COMPARED_KEYS = ("growth", "size", "endpoints_found", "direction", "action", "re
 #: A what-if keeps one frame per resting pose: frames closer than this to the last kept one.
 SAME_POSE_M = 0.002
 SAME_POSE_RAD = float(np.radians(0.5))
+
+#: Exploration options added after the log schema; a log without them ran without them.
+LATER_OPTIONS = ("other_side_views", "observed_end")
 
 ProgressFn = Callable[[int, int], None]
 
@@ -475,8 +479,15 @@ def replay_exploration(
 
 def _logged_config(first: dict[str, Any], base: ScrapcutConfig) -> ScrapcutConfig:
     """The planner's configuration from the log, with ``base``'s recording and evaluation."""
+    settings = dict(first["config"])
+    if isinstance(settings.get("exploration"), dict):
+        # Logged before these options existed: the run had neither, and its replay neither.
+        exploration = dict(settings["exploration"])
+        for key in LATER_OPTIONS:
+            exploration.setdefault(key, False)
+        settings["exploration"] = exploration
     try:
-        logged = config_from_dict(dict(first["config"]), where="exploration log")
+        logged = config_from_dict(settings, where="exploration log")
     except ConfigError as exc:
         raise ExplorationError(f"the exploration log's configuration is unusable: {exc}") from None
     return replace(logged, recording=base.recording, evaluation=base.evaluation)
@@ -509,6 +520,9 @@ def _compare(logged: dict[str, Any], replayed: dict[str, Any], frame: Frame) -> 
     for key in COMPARED_KEYS:
         if logged.get(key) != replayed.get(key):
             out.append(f"step {k}: {key} {replayed.get(key)!r}, log {logged.get(key)!r}")
+    verdicts = [_evidence_verdicts(e) for e in (logged, replayed)]
+    if verdicts[0] != verdicts[1]:
+        out.append(f"step {k}: end evidence {verdicts[1]!r}, log {verdicts[0]!r}")
     a, b = logged.get("planned_pose"), replayed.get("planned_pose")
     if (a is None) != (b is None):
         out.append(f"step {k}: planned pose {b!r:.60}, log {a!r:.60}")
@@ -524,6 +538,14 @@ def _compare(logged: dict[str, Any], replayed: dict[str, Any], frame: Frame) -> 
             f"the one the planner saw {_pose_text(pose_from_dict(executed))}"
         )
     return out
+
+
+def _evidence_verdicts(entry: dict[str, Any]) -> list[tuple[Any, ...]]:
+    """(direction, observed, frame, how) of each end-evidence check of a log entry."""
+    return [
+        (e.get("direction"), e.get("observed"), e.get("frame"), e.get("how"))
+        for e in entry.get("end_evidence", [])
+    ]
 
 
 # --------------------------------------------------------------------------- what-if
