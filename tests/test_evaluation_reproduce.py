@@ -5,6 +5,7 @@ The end-to-end run (simulate → fit → eval) is tested in tests/test_commands_
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import numpy as np
@@ -201,3 +202,27 @@ def test_a_path_that_cannot_be_measured_is_a_failed_row(
     assert row.failure is not None and "fitted curve needs at least two distinct points" in (
         row.failure
     )
+
+
+def test_drain_waits_for_messages_a_finished_worker_has_not_flushed_yet() -> None:
+    # A process pool's future can complete before the worker's feeder thread has put its last
+    # progress messages on the queue; the drain must wait for the worker's _END, not stop at
+    # the first empty read.
+    import queue
+    import threading
+
+    from scrapcut_cli.evaluation import reproduce as module
+
+    events: queue.Queue[tuple[str, str, int, int]] = queue.Queue()
+    seen: list[tuple[str, str, int, int]] = []
+
+    def late_worker() -> None:
+        time.sleep(0.3)
+        events.put(("cylinder", "done", 1, 1))
+        events.put(module._END)
+
+    threading.Thread(target=late_worker).start()
+    assert module._drain(events, lambda *e: seen.append(e)) == 0  # nothing there yet
+    assert module._drain(events, lambda *e: seen.append(e), timeout_s=5.0) == 1
+    assert seen == [("cylinder", "done", 1, 1)]
+    assert module._drain(events, lambda *e: seen.append(e), timeout_s=0.05) == -1

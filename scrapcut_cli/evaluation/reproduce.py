@@ -453,15 +453,29 @@ def _init_worker(events: Any) -> None:
     _QUEUE = events
 
 
+#: A worker's last message: everything it sent before is in the queue ahead of it.
+_END = ("", "__end__", 0, 0)
+#: How long to wait for a finished worker's last messages, seconds (a killed worker sends none).
+_END_TIMEOUT_S = 30.0
+
+
 def _worker(task: _Task) -> ObjectRun:
     def send(obj: str, stage: str, done: int, total: int) -> None:
         _QUEUE.put((obj, stage, done, total))
 
-    return run_object(task, send)
+    try:
+        return run_object(task, send)
+    finally:
+        _QUEUE.put(_END)
 
 
 def _run_tasks(tasks: list[_Task], *, jobs: int, progress: ProgressFn) -> list[ObjectRun]:
-    """Run the tasks inline (one job) or in a process pool, results in task order."""
+    """Run the tasks inline (one job) or in a process pool, results in task order.
+
+    A worker's messages reach the queue through a feeder thread, possibly after its task's
+    future completes, so the last one (``_END``) is awaited before returning: the callback sees
+    every message, "done" included.
+    """
     if jobs == 1 or len(tasks) == 1:
         return [run_object(task, progress) for task in tasks]
     # spawn, not fork: open3d and BLAS keep threads that a fork would copy mid-flight.
@@ -475,19 +489,35 @@ def _run_tasks(tasks: list[_Task], *, jobs: int, progress: ProgressFn) -> list[O
     ) as pool:
         futures = [pool.submit(_worker, task) for task in tasks]
         pending = set(futures)
+        ended = 0
         while pending:
             _, pending = wait(pending, timeout=0.1, return_when=FIRST_COMPLETED)
-            _drain(events, progress)
-        _drain(events, progress)
+            ended += _drain(events, progress)
+        while ended < len(tasks):
+            got = _drain(events, progress, timeout_s=_END_TIMEOUT_S)
+            if got < 0:
+                break  # a worker died without its last message: its future says why
+            ended += got
         return [f.result() for f in futures]
 
 
-def _drain(events: Any, progress: ProgressFn) -> None:
+def _drain(events: Any, progress: ProgressFn, *, timeout_s: float | None = None) -> int:
+    """Pass queued messages to ``progress``; the number of ``_END`` messages among them.
+
+    With ``timeout_s``, wait that long for the first message (-1 if none came).
+    """
+    ended = 0
+    first = timeout_s is not None
     while True:
         try:
-            progress(*events.get_nowait())
+            event = events.get(timeout=timeout_s) if first else events.get_nowait()
         except queue_module.Empty:
-            return
+            return -1 if first else ended
+        first = False
+        if tuple(event) == _END:
+            ended += 1
+        else:
+            progress(*event)
 
 
 def _no_progress(obj: str, stage: str, done: int, total: int) -> None:
