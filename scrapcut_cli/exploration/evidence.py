@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from scrapcut_cli.perception.cloud import usable_depth_pixels
+from scrapcut_cli.perception.cloud import grid_pixels, usable_depth_pixels
 from scrapcut_cli.recording.frame import CameraModel, Frame
 
 FloatArray = NDArray[np.float64]
@@ -101,10 +101,8 @@ def depth_view(
 ) -> DepthView:
     """The frame's :class:`DepthView`: usable depth (perception's gate: depth range, flying
     pixels judged on the full image) on a grid of stride ``camera.width // width`` (>= 1)."""
-    height_px, width_px = frame.depth.shape
-    stride = max(1, width_px // max(width, 1))
-    v, u = np.mgrid[stride // 2 : height_px : stride, stride // 2 : width_px : stride]
-    pixels = (v * width_px + u).reshape(-1).astype(np.intp)
+    stride = max(1, frame.depth.shape[1] // max(width, 1))
+    pixels, grid = grid_pixels(frame.depth.shape, stride)
     usable = usable_depth_pixels(
         frame.depth,
         pixels,
@@ -119,7 +117,7 @@ def depth_view(
         T_base_cam=np.asarray(frame.T_base_cam, dtype=np.float64).copy(),
         camera=frame.camera,
         stride=stride,
-        depth=kept.reshape(v.shape),
+        depth=kept.reshape(grid),
     )
 
 

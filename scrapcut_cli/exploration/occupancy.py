@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from scrapcut_cli.geometry import pack_voxel_keys, unpack_voxel_keys, voxel_keys
-from scrapcut_cli.perception.cloud import backproject_pixels, usable_depth_pixels
+from scrapcut_cli.perception.cloud import backproject_pixels, grid_pixels, usable_depth_pixels
 from scrapcut_cli.recording.frame import Frame
 
 FloatArray = NDArray[np.float64]
@@ -131,9 +131,7 @@ def depth_points(
     camera = frame.camera
     focal = min(camera.fx, camera.fy)
     stride = max(1, int(voxel_size_m * focal / (SAMPLES_PER_VOXEL * max(near_m, 0.05))))
-    height, width = frame.depth.shape
-    v, u = np.mgrid[stride // 2 : height : stride, stride // 2 : width : stride]
-    pixels = (v * width + u).reshape(-1).astype(np.intp)
+    pixels, _ = grid_pixels(frame.depth.shape, stride)
     usable = usable_depth_pixels(
         frame.depth,
         pixels,

@@ -169,6 +169,14 @@ def usable_depth_pixels(
     return pixels[jump <= flying_pixel_ratio * z]
 
 
+def grid_pixels(shape: tuple[int, int], stride: int) -> tuple[NDArray[np.intp], tuple[int, int]]:
+    """Flat indices of every ``stride``-th pixel of an (H, W) image, starting at
+    ``stride // 2`` in both directions (row-major), and the grid's (rows, cols)."""
+    height, width = shape
+    v, u = np.mgrid[stride // 2 : height : stride, stride // 2 : width : stride]
+    return (v * width + u).reshape(-1).astype(np.intp), (v.shape[0], v.shape[1])
+
+
 def reject_isolated_pixels(
     pixels: NDArray[np.intp], shape: tuple[int, int], *, min_neighbors: int
 ) -> NDArray[np.intp]:
