@@ -70,6 +70,14 @@ class SceneNoise:
     color_sigma: float = 0.0  # Gaussian noise on colour bytes
 
 
+#: D435i-like imperfections at half a millimetre of depth noise, for the perception tests.
+NOISY = SceneNoise(depth_sigma_m=0.0005, hole_fraction=0.02, flying_pixels=True, color_sigma=3.0)
+#: A little lighter, for the command tests (fewer holes, less colour noise).
+NOISY_LIGHT = SceneNoise(
+    depth_sigma_m=0.0005, hole_fraction=0.01, flying_pixels=True, color_sigma=2.0
+)
+
+
 def render_cylinder(
     camera: CameraModel,
     T_base_cam: FloatArray,

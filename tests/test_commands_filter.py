@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from perception_scenes import (
-    SceneNoise,
+    NOISY_LIGHT,
     cylinder_top_line,
     render_cylinder,
     small_camera,
@@ -25,8 +25,6 @@ from scrapcut_cli.perception.paint import PAINT_PRESETS
 from scrapcut_cli.recording.frame import Frame
 from scrapcut_cli.recording.reader import open_recording
 
-NOISY = SceneNoise(depth_sigma_m=0.0005, hole_fraction=0.01, flying_pixels=True, color_sigma=2.0)
-
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[Frame]]:
@@ -34,7 +32,7 @@ def scene(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[Frame]]:
     reference = cylinder_top_line()
     views = [top_view(x) for x in np.linspace(-0.1, 0.1, 5)]
     frames = [
-        render_cylinder(small_camera(), T, reference, noise=NOISY, seed=i, index=i)
+        render_cylinder(small_camera(), T, reference, noise=NOISY_LIGHT, seed=i, index=i)
         for i, T in enumerate(views)
     ]
     floor = render_cylinder(small_camera(), top_view(0.6), reference, index=5)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from perception_scenes import (
-    SceneNoise,
+    NOISY_LIGHT,
     cylinder_top_line,
     render_cylinder,
     small_camera,
@@ -24,14 +24,12 @@ from scrapcut_cli.perception.paint import PAINT_PRESETS
 from scrapcut_cli.perception.stitch import stitch_recording
 from scrapcut_cli.recording.reader import open_recording
 
-NOISY = SceneNoise(depth_sigma_m=0.0005, hole_fraction=0.01, flying_pixels=True, color_sigma=2.0)
-
 
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
     reference = cylinder_top_line()
     frames = [
-        render_cylinder(small_camera(), top_view(x), reference, noise=NOISY, seed=i, index=i)
+        render_cylinder(small_camera(), top_view(x), reference, noise=NOISY_LIGHT, seed=i, index=i)
         for i, x in enumerate(np.linspace(-0.1, 0.1, 5))
     ]
     path = tmp_path_factory.mktemp("rec") / "scene.mcap"

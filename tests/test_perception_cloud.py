@@ -9,6 +9,7 @@ import pytest
 from perception_scenes import (
     CYLINDER_AXIS_YZ,
     CYLINDER_RADIUS_M,
+    NOISY,
     SceneNoise,
     cylinder_ring_line,
     cylinder_top_line,
@@ -46,7 +47,6 @@ from scrapcut_cli.recording.frame import CameraModel, Frame
 ORANGE = PAINT_PRESETS["orange"].hsv
 CONFIG = PerceptionConfig()
 HALF_WIDTH = 0.0125
-NOISY = SceneNoise(depth_sigma_m=0.0005, hole_fraction=0.02, flying_pixels=True, color_sigma=3.0)
 
 
 def radial_error(points: np.ndarray) -> np.ndarray:

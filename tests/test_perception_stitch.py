@@ -10,7 +10,7 @@ import pytest
 from perception_scenes import (
     CYLINDER_AXIS_YZ,
     CYLINDER_RADIUS_M,
-    SceneNoise,
+    NOISY,
     cylinder_top_line,
     render_cylinder,
     small_camera,
@@ -35,7 +35,6 @@ from scrapcut_cli.recording.frame import Frame
 ORANGE = PAINT_PRESETS["orange"].hsv
 PERCEPTION = PerceptionConfig()
 HALF_WIDTH = 0.0125
-NOISY = SceneNoise(depth_sigma_m=0.0005, hole_fraction=0.02, flying_pixels=True, color_sigma=3.0)
 SWEEP_X = np.linspace(-0.12, 0.12, 9)
 
 
