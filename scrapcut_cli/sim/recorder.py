@@ -38,6 +38,7 @@ import dataclasses
 import functools
 import heapq
 import json
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -491,6 +492,9 @@ class _Session:
         delta = q_target - q0
         vmax = self.config.speed_scale * self.robot.kin.velocity
         duration = max(MIN_MOVE_S, float(np.max(MIN_JERK_PEAK * np.abs(delta) / vmax)))
+        # Whole milliseconds: joint targets differ by ~1e-8 rad between CPUs (IK in floating
+        # point), and every later stamp would inherit a few nanoseconds of that difference.
+        duration = math.ceil(duration * 1000.0 - 1e-6) / 1000.0
         start, end = self.t_ns, self.t_ns + round(duration * 1e9)
         stamps = self._samples_until(end)
         tau = (stamps - start).astype(np.float64) / (end - start)
