@@ -39,3 +39,7 @@ class EvaluationError(ScrapcutError):
 
 class SimError(ScrapcutError):
     """Unknown object, infeasible robot pose, simulator failure."""
+
+
+class MotionError(ScrapcutError):
+    """No joint trajectory: unreadable URDF or tool mount, a path the robot cannot follow."""

@@ -12,7 +12,7 @@ import pytest
 from scrapcut_cli.geometry import look_at, rotation_angle
 from scrapcut_cli.sim import make_object
 from scrapcut_cli.sim.camera import T_HAND_CAMLINK
-from scrapcut_cli.sim.robot import Q_READY, PandaKinematics, PandaSim
+from scrapcut_cli.sim.robot import Q_READY, PandaSim
 
 
 @pytest.fixture(scope="module")
@@ -32,15 +32,6 @@ def test_numpy_forward_kinematics_matches_pybullet(panda: PandaSim) -> None:
         assert np.allclose(T[:3, 3], state[4], atol=1e-6)
         R_pb = np.array(panda._client.getMatrixFromQuaternion(state[5])).reshape(3, 3)
         assert rotation_angle(T[:3, :3], R_pb) < 1e-6
-
-
-def test_chain_composes_to_the_flange_for_many_samples() -> None:
-    kin = PandaKinematics()
-    qs = np.random.default_rng(1).uniform(kin.lower, kin.upper, (5, 7))
-    chain = kin.chain(qs)
-    assert chain.shape == (5, 8, 4, 4)
-    product = np.stack([np.linalg.multi_dot(list(c)) for c in chain])
-    assert np.allclose(product, kin.flange(qs), atol=1e-12)
 
 
 def test_ik_places_the_camera_where_asked(panda: PandaSim) -> None:

@@ -2,9 +2,10 @@
 
 The arm is ``franka_panda/panda.urdf`` from ``pybullet_data`` with a fixed base at the origin
 of ``panda_link0``. pybullet (DIRECT mode, no GUI) answers inverse kinematics and collision
-queries against the TRUE piece mesh and the floor; forward kinematics for /tf is evaluated here
-in numpy from the same URDF (vectorised over hundreds of samples per motion, where pybullet
-would need a call per sample), and a test checks both agree.
+queries against the TRUE piece mesh and the floor; forward kinematics for /tf is evaluated in
+numpy from the same URDF by :class:`scrapcut_cli.motion.panda.PandaKinematics` (vectorised over
+hundreds of samples per motion, where pybullet would need a call per sample), and a test checks
+both agree.
 
 A requested camera pose is executed as the paper's Section IV-B describes: the optical axis is
 kept, the rotation about it and the distance to the surface are the free degrees of freedom.
@@ -17,16 +18,13 @@ out of reach or beyond the joint limits, so those give up at once).
 
 from __future__ import annotations
 
-import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from types import TracebackType
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation
 
 from scrapcut_cli.errors import SimError
 from scrapcut_cli.geometry import (
@@ -35,6 +33,16 @@ from scrapcut_cli.geometry import (
     matrix_to_quat_xyzw,
     rotation_angle,
 )
+
+# The chain lives in motion/ (planning never imports the simulator); the names the recorder
+# uses are re-exported here.
+from scrapcut_cli.motion.panda import (
+    ARM_JOINTS,
+    PandaKinematics,
+    default_urdf_path,
+)
+from scrapcut_cli.motion.panda import LINK_NAMES as LINK_NAMES
+from scrapcut_cli.motion.panda import Q_READY as Q_READY
 from scrapcut_cli.sim._pybullet import pybullet, quiet_stdout
 from scrapcut_cli.sim.camera import (
     HOUSING_CENTRE_CAMLINK,
@@ -45,92 +53,13 @@ from scrapcut_cli.sim.mesh import TriMesh
 
 FloatArray = NDArray[np.float64]
 
-ARM_JOINTS = tuple(f"panda_joint{i}" for i in range(1, 8))
 FINGER_JOINTS = ("panda_finger_joint1", "panda_finger_joint2")
-LINK_NAMES = tuple(f"panda_link{i}" for i in range(9))  # link0 (base) ... link8 (flange)
-#: Franka's "ready" pose: elbow up, hand pointing down.
-Q_READY = (0.0, -np.pi / 4, 0.0, -3 * np.pi / 4, 0.0, np.pi / 2, np.pi / 4)
 FINGER_OPENING_M = 0.02
 
 #: pybullet link indices (joint index = child link index; the base is -1)
 _FLANGE_LINK = 7
 _NO_FLOOR_CHECK = (-1, 0)  # panda_link0 stands on the floor; link1 is the column above it
 _HOUSING_VS_ARM = (-1, 0, 1, 2, 3, 4)  # the camera may hit the arm up to panda_link5
-
-
-def _urdf_path() -> Path:
-    import pybullet_data
-
-    return Path(pybullet_data.getDataPath()) / "franka_panda" / "panda.urdf"
-
-
-def _origin(element: ET.Element | None) -> FloatArray:
-    if element is None:
-        return np.eye(4)
-    xyz = [float(v) for v in element.get("xyz", "0 0 0").split()]
-    rpy = [float(v) for v in element.get("rpy", "0 0 0").split()]
-    # URDF rpy: fixed-axis roll, pitch, yaw = R_z(yaw) R_y(pitch) R_x(roll).
-    return make_transform(Rotation.from_euler("xyz", rpy).as_matrix(), xyz)
-
-
-class PandaKinematics:
-    """Forward kinematics of the Panda arm from its URDF, vectorised over joint samples."""
-
-    def __init__(self, urdf: str | Path | None = None) -> None:
-        root = ET.parse(str(urdf or _urdf_path())).getroot()
-        joints = {j.get("name"): j for j in root.findall("joint")}
-        origins, lower, upper, velocity = [], [], [], []
-        for name in (*ARM_JOINTS, "panda_joint8"):
-            joint = joints.get(name)
-            if joint is None:
-                raise SimError(f"panda.urdf has no joint {name}")
-            origins.append(_origin(joint.find("origin")))
-            if name in ARM_JOINTS:
-                axis = joint.find("axis")
-                if axis is None or [float(v) for v in axis.get("xyz", "").split()] != [0, 0, 1]:
-                    raise SimError(f"panda.urdf joint {name} does not turn about z")
-                limit = joint.find("limit")
-                assert limit is not None
-                lower.append(float(limit.get("lower", "0")))
-                upper.append(float(limit.get("upper", "0")))
-                velocity.append(float(limit.get("velocity", "1")))
-        hand = joints.get("panda_hand_joint")
-        if hand is None:
-            raise SimError("panda.urdf has no panda_hand_joint")
-        self.origins = np.stack(origins)  # (8, 4, 4): joint1..7 and the fixed joint8
-        self.lower = np.array(lower)
-        self.upper = np.array(upper)
-        self.velocity = np.array(velocity)
-        self.T_link8_hand = _origin(hand.find("origin"))
-
-    def chain(self, q: ArrayLike) -> FloatArray:
-        """T_parent_child (S, 8, 4, 4) for link0->link1 ... link7->link8 at joint samples (S, 7)."""
-        qs = np.atleast_2d(np.asarray(q, dtype=np.float64))
-        n = len(qs)
-        c, s = np.cos(qs), np.sin(qs)
-        rz = np.zeros((n, 7, 4, 4))
-        rz[:, :, 0, 0] = c
-        rz[:, :, 0, 1] = -s
-        rz[:, :, 1, 0] = s
-        rz[:, :, 1, 1] = c
-        rz[:, :, 2, 2] = 1.0
-        rz[:, :, 3, 3] = 1.0
-        out = np.empty((n, 8, 4, 4))
-        out[:, :7] = self.origins[None, :7] @ rz
-        out[:, 7] = self.origins[7]
-        return out
-
-    def flange(self, q: ArrayLike) -> FloatArray:
-        """T_base_link8 (S, 4, 4) at joint samples (S, 7) (or (4, 4) for one (7,) sample)."""
-        chain = self.chain(q)
-        T = chain[:, 0]
-        for k in range(1, 8):
-            T = T @ chain[:, k]
-        return T if np.asarray(q).ndim > 1 else T[0]
-
-    def within_limits(self, q: ArrayLike, margin: float = 0.0) -> bool:
-        qq = np.asarray(q, dtype=np.float64)
-        return bool(np.all(qq >= self.lower + margin) and np.all(qq <= self.upper - margin))
 
 
 @dataclass(frozen=True, eq=False)
@@ -229,7 +158,7 @@ class PandaSim:
         with quiet_stdout():
             self._client: Any = BulletClient(connection_mode=p.DIRECT)
             self._robot = self._client.loadURDF(
-                str(_urdf_path()), useFixedBase=True, flags=p.URDF_USE_INERTIA_FROM_FILE
+                str(default_urdf_path()), useFixedBase=True, flags=p.URDF_USE_INERTIA_FROM_FILE
             )
         c = self._client
         self._p = p
