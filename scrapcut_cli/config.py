@@ -13,19 +13,44 @@ configuration is saved next to every result (path files, reproduce reports).
 
 Units follow DESIGN.md: metres, radians, seconds inside; a name ending in ``_mm`` or ``_deg``
 says otherwise.
+
+Every numeric parameter declares its range where it is declared, from the physics of the cell
+(a depth camera, a torch, a Panda), with the reason: ``rng(default, lo, hi, unit, why)``.
+:func:`validate` checks a whole configuration against these ranges (finite, within [lo, hi],
+whole numbers for counts) plus the relations between fields (``ORDERED``); it runs wherever a
+configuration is built from outside: a TOML file (:func:`load_config`, :func:`config_from_dict`)
+and command-line overrides (:meth:`ScrapcutConfig.override`). Command-line options take their
+bounds from the same table (``commands._options.config_type``). A test fails for any numeric
+parameter without a range.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 import tomllib
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, ClassVar, TypeVar
 
 from scrapcut_cli.errors import ConfigError
 
 T = TypeVar("T")
+
+#: Metadata keys of a ranged field (see :func:`rng`).
+RANGE, UNIT, WHY = "range", "unit", "why"
+
+
+def rng(default: T, lo: float, hi: float, unit: str, why: str) -> T:
+    """A dataclass field with ``default`` whose value (when not None) lies in [lo, hi] ``unit``.
+
+    ``why`` says where the bounds come from (it is part of the error message). For a tuple
+    field the range holds for every element. Counts (int fields) must be whole numbers.
+    """
+    if not lo <= hi:
+        raise ValueError(f"empty range [{lo}, {hi}]")
+    meta = {RANGE: (lo, hi), UNIT: unit, WHY: why}
+    return field(default=default, metadata=meta)
 
 
 @dataclass(frozen=True)
@@ -36,7 +61,15 @@ class RecordingConfig:
     depth_topic: str | None = None
     info_topic: str | None = None
     base_frame: str | None = None  # None: the TF root
-    sync_tolerance_s: float = 0.02  # colour/depth pairing by header stamp (D435i at 30 Hz: 33 ms)
+    # colour/depth pairing by header stamp (D435i at 30 Hz: 33 ms)
+    sync_tolerance_s: float = rng(
+        0.02,
+        0.0,
+        1.0,
+        "s",
+        "a colour and a depth image over 1 s apart do not show one scene from a moving wrist "
+        "(cameras stream at 6-90 Hz)",
+    )
 
 
 @dataclass(frozen=True)
@@ -50,7 +83,14 @@ class PaintConfig:
     """
 
     preset: str | None = None
-    hsv: tuple[float, float, float, float] | None = None
+    hsv: tuple[float, float, float, float] | None = field(
+        default=None,
+        metadata={
+            RANGE: ((0.0, 360.0), (0.0, 360.0), (0.0, 1.0), (0.0, 1.0)),
+            UNIT: "deg, deg, -, -",
+            WHY: "hues are angles on the colour wheel; saturation and value are shares",
+        },
+    )
 
 
 @dataclass(frozen=True)
@@ -70,20 +110,88 @@ class PerceptionConfig:
     + 2 mm from ~1 % (with 2 of 4) to under 0.1 %.
     """
 
-    min_depth_m: float = 0.1
-    max_depth_m: float = 2.0
-    sor_neighbors: int = 20
-    sor_std_ratio: float = 2.0
-    voxel_size_m: float = 0.002
-    surface_band_m: float = 0.04
-    surface_voxel_m: float = 0.004
-    flying_pixel_ratio: float = 0.03  # reject depth jumping > ratio * depth to a 4-neighbour
-    min_paint_points: int = 20  # fewer voxels of paint after outlier removal: frame skipped
-    min_paint_neighbors: int = 3  # of 4; paint pixels with fewer paint neighbours are noise
+    #: (a, b): field a must not exceed field b.
+    ORDERED: ClassVar[tuple[tuple[str, str], ...]] = (("min_depth_m", "max_depth_m"),)
+
+    min_depth_m: float = rng(
+        0.1, 0.0, 10.0, "m", "depth cameras see from 0 to about 10 m (the D435i's maximum range)"
+    )
+    max_depth_m: float = rng(
+        2.0,
+        0.01,
+        10.0,
+        "m",
+        "a depth gate under 10 mm keeps nothing; the D435i sees at most about 10 m",
+    )
+    sor_neighbors: int = rng(
+        20,
+        0,
+        1000,
+        "",
+        "0 switches outlier removal off; 1000 neighbours at 2 mm voxels span more stroke than a "
+        "frame shows",
+    )
+    sor_std_ratio: float = rng(
+        2.0,
+        0.1,
+        100.0,
+        "",
+        "under 0.1 standard deviations removes most of an honest stroke; over 100 removes nothing "
+        "(0 neighbours switches it off)",
+    )
+    voxel_size_m: float = rng(
+        0.002,
+        1e-4,
+        0.05,
+        "m",
+        "0.1 mm is finer than any depth camera resolves at the wrist; 50 mm is twice a stroke's "
+        "width, no stroke left",
+    )
+    surface_band_m: float = rng(
+        0.04,
+        0.0,
+        1.0,
+        "m",
+        "0 keeps no surface; 1 m is more than the whole scene a wrist camera sees",
+    )
+    surface_voxel_m: float = rng(
+        0.004,
+        1e-4,
+        0.1,
+        "m",
+        "0.1 mm is finer than any depth camera resolves; 100 mm leaves no surface shape for "
+        "normals",
+    )
+    # reject depth jumping > ratio * depth to a 4-neighbour
+    flying_pixel_ratio: float = rng(
+        0.03,
+        1e-3,
+        1.0,
+        "",
+        "under 0.1 % of the depth is below the D435i's own noise; a jump larger than the depth "
+        "itself is no flying pixel test",
+    )
+    # fewer voxels of paint after outlier removal: frame skipped
+    min_paint_points: int = rng(
+        20,
+        0,
+        1_000_000,
+        "",
+        "a frame of 4096 x 4096 px at 2 mm voxels never holds a million paint voxels",
+    )
+    # of 4; paint pixels with fewer paint neighbours are noise
+    min_paint_neighbors: int = rng(3, 0, 4, "", "a pixel has 4 neighbours")
     # Paint blobs (8-connected in the image) covering less surface than this are overspray
     # specks, not a stroke: a speck is a drop a few mm across (at most ~12 mm^2 seen on the
     # simulator's heavy overspray), the least a stroke shows is a wire's share (4 x 25 mm).
-    min_paint_area_m2: float = 25e-6  # 0: off
+    # 0: off
+    min_paint_area_m2: float = rng(
+        25e-6,
+        0.0,
+        0.01,
+        "m2",
+        "0 is off; a blob of 1 dm^2 is a 25 mm stroke 400 mm long, not a speck",
+    )
 
 
 @dataclass(frozen=True)
@@ -96,89 +204,313 @@ class StitchConfig:
     frame's overlapping paint within one voxel of the cloud, and it is within the bounds.
     """
 
-    voxel_size_m: float = 0.002
+    voxel_size_m: float = rng(
+        0.002,
+        1e-4,
+        0.05,
+        "m",
+        "0.1 mm is finer than any depth camera resolves at the wrist; 50 mm is twice a stroke's "
+        "width",
+    )
     icp: bool = False
-    icp_max_distance_m: float = 0.01
-    icp_max_translation_m: float = 0.005
-    icp_max_rotation_deg: float = 2.0
+    icp_max_distance_m: float = rng(
+        0.01,
+        1e-4,
+        0.2,
+        "m",
+        "under 0.1 mm no correspondence survives sensor noise; beyond 0.2 m ICP pairs other parts "
+        "of the piece",
+    )
+    icp_max_translation_m: float = rng(
+        0.005,
+        0.0,
+        0.1,
+        "m",
+        "a pose error over 100 mm is a broken calibration, not drift ICP should absorb",
+    )
+    icp_max_rotation_deg: float = rng(
+        2.0,
+        0.0,
+        45.0,
+        "deg",
+        "a pose error over 45 deg is a broken calibration, not drift ICP should absorb",
+    )
     icp_method: str = "point_to_point"  # or "point_to_plane" (slides on planes and pipes)
-    icp_max_iterations: int = 30
-    icp_min_overlap: float = 0.3  # share of the frame's points near the cloud needed to try ICP
+    icp_max_iterations: int = rng(
+        30, 1, 10_000, "", "ICP converges in tens of iterations; 10,000 only burns time"
+    )
+    # share of the frame's points near the cloud needed to try ICP
+    icp_min_overlap: float = rng(0.3, 0.0, 1.0, "", "a share of the frame's points")
 
 
 @dataclass(frozen=True)
 class NurbsConfig:
     """Open NURBS fit (point-distance minimisation, as PCL on_nurbs but with clamped ends)."""
 
-    degree: int = 3
-    control_points: int | None = None  # None: scales with curve length
-    smoothness: float = 1.0  # the paper's weight
-    max_iterations: int = 50
-    tolerance_m: float = 1e-6
+    degree: int = rng(
+        3, 1, 5, "", "degrees 1-5 cover polylines to quintics; higher degrees oscillate"
+    )
+    # None: scales with curve length
+    control_points: int | None = rng(
+        None,
+        2,
+        5000,
+        "",
+        "a curve needs at least 2; 5000 on a 5 m line are 1 mm apart, finer than the sensor, and "
+        "the solve grows with their square",
+    )
+    # the paper's weight
+    smoothness: float = rng(
+        1.0,
+        0.0,
+        1e8,
+        "",
+        "a weight >= 0; at 1e8 it damps wiggles up to metres long (wavelength grows with its 4th "
+        "root): the curve is a straight line",
+    )
+    max_iterations: int = rng(
+        50, 1, 10_000, "", "the fit converges in tens of iterations; 10,000 only burns time"
+    )
+    tolerance_m: float = rng(
+        1e-6,
+        1e-12,
+        1e-3,
+        "m",
+        "a tolerance must be > 0; over 1 mm it stops before the fit resolves a 25 mm stroke",
+    )
     refine: bool = True
     # smoothness w weighs the bending energy w * l^4 * integral |C''(s)|^2 ds against the squared
     # residual, both per metre of curve: independent of point density and of the number of
     # control points; w = 1 damps wiggles shorter than about 2*pi*l. l is this length or 1.5x
     # the RMS residual of the initial fit (the paint band's own scale), whichever is larger.
-    smoothing_length_m: float = 0.003
-    control_point_spacing_m: float = 0.02  # default count: length / spacing + degree
-    max_control_points: int = 200
+    smoothing_length_m: float = rng(
+        0.003,
+        1e-4,
+        0.5,
+        "m",
+        "0.1 mm is under the sensor's noise; 0.5 m smooths away every turn of a scrap piece",
+    )
+    # default count: length / spacing + degree
+    control_point_spacing_m: float = rng(
+        0.02,
+        1e-3,
+        1.0,
+        "m",
+        "under 1 mm control points follow sensor noise; 1 m spacing is one span for a whole piece",
+    )
+    max_control_points: int = rng(
+        200,
+        2,
+        5000,
+        "",
+        "a curve needs at least 2; 5000 on a 5 m line are 1 mm apart, finer than the sensor",
+    )
     init: str = "auto"  # "principal" (the paper), "chain" (spanning-tree order) or "auto": best
-    refine_rounds: int = 4  # knot insertion where the residuals stay one-sided
-    refine_bias_m: float = 0.0005  # a knot span's mean residual above this (and noise) is split
-    min_knot_spacing_m: float = 0.004
+    # knot insertion where the residuals stay one-sided
+    refine_rounds: int = rng(
+        4, 0, 100, "", "each round at most doubles the knots; 100 rounds is far past convergence"
+    )
+    # a knot span's mean residual above this (and noise) is split
+    refine_bias_m: float = rng(
+        0.0005,
+        0.0,
+        0.05,
+        "m",
+        "a mean residual over 50 mm is twice a stroke's width, no refinement criterion",
+    )
+    min_knot_spacing_m: float = rng(
+        0.004, 1e-4, 1.0, "m", "0.1 mm is under the sensor's noise; 1 m leaves one span for a piece"
+    )
     robust: bool = True  # Huber weights against outliers left by the outlier filter
-    end_quantile: float = 0.002  # the curve ends where this share of the points lies beyond
-    sample_spacing_m: float = 0.001  # spacing of Curve.points
-    corner_angle_deg: float = 30.0  # sharper turns become kinks (C0 knots); 0: smooth only
-    max_corners: int = 8
+    # the curve ends where this share of the points lies beyond
+    end_quantile: float = rng(
+        0.002,
+        0.0,
+        0.25,
+        "",
+        "a share of the points beyond each end; 0.25 at both ends already drops half the line",
+    )
+    # spacing of Curve.points
+    sample_spacing_m: float = rng(
+        0.001,
+        1e-4,
+        0.05,
+        "m",
+        "0.1 mm is finer than any sensor; over 50 mm the polyline cuts corners of a scrap piece",
+    )
+    # sharper turns become kinks (C0 knots); 0: smooth only
+    corner_angle_deg: float = rng(30.0, 0.0, 180.0, "deg", "an angle between directions")
+    max_corners: int = rng(8, 0, 1000, "", "more than 1000 kinks is no line a torch follows")
     # Ends: a spray stroke's round cap reaches about half a stroke width past the line's end.
     # "auto": end at each cap's centre (a square end, paint running off an edge, is kept);
     # "cap": always a round cap; "none": the paint's extent. See fitting/ends.py.
     end_trim: str = "auto"
-    end_trim_m: float | None = None  # fixed trim at each end instead of the estimate
+    # fixed trim at each end instead of the estimate
+    end_trim_m: float | None = rng(
+        None,
+        0.0,
+        0.5,
+        "m",
+        "a trim over 0.5 m at each end cuts away more than a stroke's cap by far",
+    )
 
 
 @dataclass(frozen=True)
 class SkeletonConfig:
     """3-D skeletonisation (voxelise, thin, graph, prune, longest path)."""
 
-    leaf_size_m: float = 0.005  # the paper's leaf size
-    prune_length_m: float = 0.02
-    smoothing_window: int = 5
-    closing_voxels: int = 1  # morphological closing radius, voxels (0: none)
-    min_piece_share: float = 0.02  # smaller pieces (share of points) are stray paint, ignored
-    max_block_voxels: int = 4_194_304  # dense thinning block budget (4 MiB); larger: tiled
-    block_margin_m: float = 0.05  # overlap of the thinning tiles
-    refine_radius_m: float = 0.03  # paint points this close to the skeleton pull it to their centre
-    refine_window_m: float | None = None  # arc-length half window; None: from the band width
-    corner_angle_deg: float = 30.0  # sharper turns are kept as corners (not smoothed across)
-    refine_iterations: int = 2
-    end_quantile: float = 0.002  # the curve ends where this share of the points lies beyond
-    sample_spacing_m: float = 0.001  # spacing of Curve.points
+    # the paper's leaf size
+    leaf_size_m: float = rng(
+        0.005,
+        1e-3,
+        0.1,
+        "m",
+        "under 1 mm the leaf thins sensor noise and the thinning grid of a 1 m piece reaches 1e9 "
+        "voxels; 100 mm is four strokes wide",
+    )
+    prune_length_m: float = rng(0.02, 0.0, 1.0, "m", "branches over 1 m are the line itself")
+    smoothing_window: int = rng(5, 1, 1001, "", "a window of points along the skeleton (1: none)")
+    # morphological closing radius, voxels (0: none)
+    closing_voxels: int = rng(
+        1, 0, 20, "", "a closing radius of 20 leaves bridges gaps of 10 cm at the paper's 5 mm leaf"
+    )
+    # smaller pieces (share of points) are stray paint, ignored
+    min_piece_share: float = rng(0.02, 0.0, 1.0, "", "a share of the points")
+    # dense thinning block budget (4 MiB); larger: tiled
+    max_block_voxels: int = rng(
+        4_194_304,
+        1000,
+        268_435_456,
+        "",
+        "under 1000 (10^3) a tile has no room for its margin; 2^28 voxels need gigabytes for one "
+        "block",
+    )
+    # overlap of the thinning tiles
+    block_margin_m: float = rng(
+        0.05, 0.0, 1.0, "m", "tiles overlapping by over 1 m are the whole piece"
+    )
+    # paint points this close to the skeleton pull it to their centre
+    refine_radius_m: float = rng(
+        0.03,
+        1e-4,
+        0.5,
+        "m",
+        "under 0.1 mm no paint point is near; over 0.5 m every point of a piece pulls",
+    )
+    # arc-length half window; None: from the band width
+    refine_window_m: float | None = rng(
+        None, 1e-4, 1.0, "m", "a half window along the curve; 1 m averages the whole line"
+    )
+    # sharper turns are kept as corners (not smoothed across)
+    corner_angle_deg: float = rng(30.0, 0.0, 180.0, "deg", "an angle between directions")
+    refine_iterations: int = rng(2, 0, 100, "", "the refinement settles in a few iterations")
+    # the curve ends where this share of the points lies beyond
+    end_quantile: float = rng(
+        0.002,
+        0.0,
+        0.25,
+        "",
+        "a share of the points beyond each end; 0.25 at both ends already drops half the line",
+    )
+    # spacing of Curve.points
+    sample_spacing_m: float = rng(
+        0.001,
+        1e-4,
+        0.05,
+        "m",
+        "0.1 mm is finer than any sensor; over 50 mm the polyline cuts corners of a scrap piece",
+    )
     end_trim: str = "auto"  # "auto" | "cap" | "none": as NurbsConfig.end_trim
-    end_trim_m: float | None = None  # fixed trim at each end instead of the estimate
+    # fixed trim at each end instead of the estimate
+    end_trim_m: float | None = rng(
+        None,
+        0.0,
+        0.5,
+        "m",
+        "a trim over 0.5 m at each end cuts away more than a stroke's cap by far",
+    )
 
 
 @dataclass(frozen=True)
 class ToolpathConfig:
     """Cutting set-points, torch orientation, collisions and speeds."""
 
-    spacing_m: float = 0.005
-    standoff_m: float = 0.008
-    normal_radius_m: float = 0.015
-    torch_length_m: float = 0.15
-    torch_radius_m: float = 0.012
-    max_tilt_deg: float = 20.0
+    spacing_m: float = rng(
+        0.005,
+        1e-4,
+        0.5,
+        "m",
+        "0.1 mm is the Panda's repeatability (a 2 m cut would hold 20,000 set-points); 0.5 m "
+        "spacing misses every turn",
+    )
+    standoff_m: float = rng(
+        0.008,
+        5e-4,
+        0.1,
+        "m",
+        "an oxy-fuel or plasma torch cuts 1-10 mm off the plate; under 0.5 mm it touches, beyond "
+        "100 mm the flame does not reach",
+    )
+    normal_radius_m: float = rng(
+        0.015,
+        1e-3,
+        0.5,
+        "m",
+        "under 1 mm a neighbourhood holds no surface points; 0.5 m averages the whole piece",
+    )
+    torch_length_m: float = rng(
+        0.15, 0.01, 2.0, "m", "hand-held to machine torches are 0.01-2 m long"
+    )
+    torch_radius_m: float = rng(
+        0.012, 1e-3, 0.2, "m", "torch nozzles and bodies are 1-200 mm in radius"
+    )
+    max_tilt_deg: float = rng(20.0, 0.0, 89.0, "deg", "at 90 deg the torch lies on the plate")
     material: str = "mild_steel"
-    thickness_mm: float = 10.0
-    coarse_normal_radius_m: float = 0.030  # used where the normal_radius_m plane is rough
-    normal_smoothing_m: float = 0.010  # Gaussian sigma of the smoothing along the path
-    edge_angle_deg: float = 30.0  # normals further apart are on different faces: not averaged
-    min_surface_points: int = 8  # fewer within normal_radius_m: "no_surface", normal interpolated
-    collision_min_points: int = 3  # observed points inside the torch body that make a collision
-    tilt_steps: int = 4  # tilt angles tried, evenly up to max_tilt_deg
-    tilt_directions: int = 8  # tilt directions tried around the normal
+    thickness_mm: float = rng(
+        10.0,
+        0.1,
+        2000.0,
+        "mm",
+        "thinner than 0.1 mm is foil; oxy-fuel charts end well before 2 m of steel",
+    )
+    # used where the normal_radius_m plane is rough
+    coarse_normal_radius_m: float = rng(
+        0.030,
+        1e-3,
+        0.5,
+        "m",
+        "under 1 mm a neighbourhood holds no surface points; 0.5 m averages the whole piece",
+    )
+    # Gaussian sigma of the smoothing along the path
+    normal_smoothing_m: float = rng(
+        0.010,
+        0.0,
+        1.0,
+        "m",
+        "a Gaussian sigma along the path; 1 m flattens a whole piece's normals",
+    )
+    # normals further apart are on different faces: not averaged
+    edge_angle_deg: float = rng(30.0, 0.0, 180.0, "deg", "an angle between normals")
+    # fewer within normal_radius_m: "no_surface", normal interpolated
+    min_surface_points: int = rng(
+        8,
+        3,
+        100_000,
+        "",
+        "a plane needs 3 points; no neighbourhood at sensor density holds 100,000",
+    )
+    # observed points inside the torch body that make a collision
+    collision_min_points: int = rng(
+        3, 1, 100_000, "", "at least one point; no torch body at sensor density holds 100,000"
+    )
+    # tilt angles tried, evenly up to max_tilt_deg
+    tilt_steps: int = rng(
+        4, 1, 90, "", "more than one step per degree of tilt tries the same pose twice"
+    )
+    # tilt directions tried around the normal
+    tilt_directions: int = rng(
+        8, 1, 360, "", "more than one direction per degree tries the same pose twice"
+    )
     speed_table: str | None = None  # CSV of speeds; None: the bundled oxy-fuel table
 
 
@@ -186,40 +518,131 @@ class ToolpathConfig:
 class ExplorationConfig:
     """Algorithm 1's next-view planner and stopping criterion."""
 
+    ORDERED: ClassVar[tuple[tuple[str, str], ...]] = (("min_distance_m", "max_distance_m"),)
+
     method: str = "nurbs"
     # growth(k) = new paint voxels farther than novelty_m from the cloud before frame k; an end
     # is declared when growth(k) <= delta_size (re-observing known paint grows ~0 this way).
-    delta_size: int = 20
-    step_m: float = 0.06  # next view's target: this far beyond the fitted curve's end
-    min_distance_m: float = 0.2  # camera distance search, from the camera's minimum upward
-    max_distance_m: float = 0.45
-    distance_step_m: float = 0.025
-    max_steps: int = 60  # frames observed before stopping with "budget"
-    novelty_m: float = 0.01
-    fit_voxel_m: float = 0.006  # the local fit runs on the paint thinned to this voxel
-    fit_margin_m: float = 0.05  # local fit window: the frame's paint extent plus this margin
-    normal_radius_m: float = 0.03  # observed surface used for the normal at a target
-    min_elevation_deg: float = 35.0  # views stay at least this high above their target
-    roll_step_deg: float = 45.0  # rotation about the optical axis tried in these steps
-    revisit_radius_m: float = 0.02  # a target this close to a visited one is not taken again
-    occupancy_voxel_m: float = 0.01  # voxel hash of every observed depth point (collisions)
-    inflation_m: float = 0.02  # safety margin around occupied voxels
-    body_front_m: float = 0.07  # camera + hand as a capsule along the optical axis: front,
-    body_back_m: float = 0.25  # back (towards the flange) and radius
-    body_radius_m: float = 0.06
+    delta_size: int = rng(
+        20, 0, 1_000_000, "", "a frame of 4096 x 4096 px never adds a million paint voxels"
+    )
+    # next view's target: this far beyond the fitted curve's end
+    step_m: float = rng(
+        0.06,
+        1e-3,
+        1.0,
+        "m",
+        "a step under 1 mm never leaves the view; beyond 1 m it leaves the Panda's reach",
+    )
+    # camera distance search, from the camera's minimum upward
+    min_distance_m: float = rng(
+        0.2,
+        0.05,
+        3.0,
+        "m",
+        "depth cameras see from about 0.1 m; beyond 3 m a D435i's depth is too coarse for a 25 mm "
+        "stroke",
+    )
+    max_distance_m: float = rng(
+        0.45,
+        0.05,
+        3.0,
+        "m",
+        "depth cameras see from about 0.1 m; beyond 3 m a D435i's depth is too coarse for a 25 mm "
+        "stroke",
+    )
+    distance_step_m: float = rng(
+        0.025, 1e-3, 1.0, "m", "steps under 1 mm repeat one view; over 1 m skip the whole range"
+    )
+    # frames observed before stopping with "budget"
+    max_steps: int = rng(60, 1, 10_000, "", "a scan of 10,000 views takes hours of robot time")
+    novelty_m: float = rng(
+        0.01,
+        1e-4,
+        0.5,
+        "m",
+        "under 0.1 mm every noisy point is new; over 0.5 m nothing on a piece is",
+    )
+    # the local fit runs on the paint thinned to this voxel
+    fit_voxel_m: float = rng(
+        0.006, 1e-4, 0.1, "m", "0.1 mm is finer than any sensor; 100 mm is four strokes wide"
+    )
+    # local fit window: the frame's paint extent plus this margin
+    fit_margin_m: float = rng(
+        0.05, 0.0, 2.0, "m", "a margin beyond 2 m is the whole reach of the arm"
+    )
+    # observed surface used for the normal at a target
+    normal_radius_m: float = rng(
+        0.03,
+        1e-3,
+        0.5,
+        "m",
+        "under 1 mm a neighbourhood holds no surface points; 0.5 m averages the whole piece",
+    )
+    # views stay at least this high above their target
+    min_elevation_deg: float = rng(
+        35.0, 0.0, 90.0, "deg", "an elevation above the target's surface"
+    )
+    # rotation about the optical axis tried in these steps
+    roll_step_deg: float = rng(
+        45.0, 1.0, 360.0, "deg", "a roll step under 1 deg tries hundreds of near-equal views"
+    )
+    # a target this close to a visited one is not taken again
+    revisit_radius_m: float = rng(
+        0.02, 0.0, 1.0, "m", "a radius over 1 m forbids every target on a piece after the first"
+    )
+    # voxel hash of every observed depth point (collisions)
+    occupancy_voxel_m: float = rng(
+        0.01,
+        1e-3,
+        0.5,
+        "m",
+        "under 1 mm the voxel hash of every depth point grows past memory; 0.5 m voxels block the "
+        "whole cell",
+    )
+    # safety margin around occupied voxels
+    inflation_m: float = rng(
+        0.02, 0.0, 0.5, "m", "a safety margin over 0.5 m blocks the whole cell"
+    )
+    # camera + hand as a capsule along the optical axis: front,
+    body_front_m: float = rng(
+        0.07, 0.0, 1.0, "m", "the camera and hand of a Panda measure well under 1 m"
+    )
+    # back (towards the flange) and radius
+    body_back_m: float = rng(
+        0.25, 0.0, 1.0, "m", "the camera and hand of a Panda measure well under 1 m"
+    )
+    body_radius_m: float = rng(
+        0.06, 0.0, 1.0, "m", "the camera and hand of a Panda measure well under 1 m"
+    )
     look_past: bool = True  # re-observe past an edge or sharp turn before declaring an end
-    look_past_angles_deg: tuple[float, ...] = (60.0, 90.0, 40.0)  # view tilts about the edge
-    edge_probe_m: float = 0.025  # surface must continue this far beyond a confirmed end
-    turn_angle_deg: float = 45.0  # the fitted curve turning more near its end: look past
+    # view tilts about the edge
+    look_past_angles_deg: tuple[float, ...] = rng(
+        (60.0, 90.0, 40.0), 0.0, 180.0, "deg", "tilts about an edge"
+    )
+    # surface must continue this far beyond a confirmed end
+    edge_probe_m: float = rng(0.025, 0.0, 0.5, "m", "a probe over 0.5 m reaches past most pieces")
+    # the fitted curve turning more near its end: look past
+    turn_angle_deg: float = rng(45.0, 0.0, 180.0, "deg", "an angle between directions")
     # No view past an end from the normal's side: try the surface's other side (a mesh, a sheet)
     other_side_views: bool = True
     # Still no view: the end counts if an earlier frame observed it (exploration.evidence):
     # tip and continuation (edge_probe_m past it) this share of the image inside the border,
     # judged on depth windows of this radius with this tolerance.
     observed_end: bool = True
-    observed_end_margin: float = 0.05
-    observed_end_window_m: float = 0.006
-    observed_end_tolerance_m: float = 0.01
+    observed_end_margin: float = rng(
+        0.05, 0.0, 0.5, "", "a share of the image; 0.5 leaves no inside"
+    )
+    observed_end_window_m: float = rng(
+        0.006,
+        1e-4,
+        0.1,
+        "m",
+        "0.1 mm is finer than any sensor; a 100 mm window is four strokes wide",
+    )
+    observed_end_tolerance_m: float = rng(
+        0.01, 1e-4, 0.5, "m", "under 0.1 mm no depth agrees; over 0.5 m every depth does"
+    )
 
 
 @dataclass(frozen=True)
@@ -229,34 +652,94 @@ class SimConfig:
     object: str = "cylinder"
     mode: str = "sweep"
     noise: str = "d435i"
-    width: int = 640
-    height: int = 480
-    stroke_width_m: float = 0.025
-    view_distance_m: float = 0.3
-    seed: int = 0
+    width: int = rng(
+        640,
+        16,
+        4096,
+        "px",
+        "16 px shows nothing; a 4096 px image is beyond any RGB-D sensor (the D435i's colour is "
+        "1920 x 1080)",
+    )
+    height: int = rng(
+        480,
+        12,
+        4096,
+        "px",
+        "12 px shows nothing; a 4096 px image is beyond any RGB-D sensor (the D435i's colour is "
+        "1920 x 1080)",
+    )
+    stroke_width_m: float = rng(0.025, 1e-3, 0.2, "m", "marking-paint strokes are 5-100 mm wide")
+    view_distance_m: float = rng(
+        0.3,
+        0.1,
+        3.0,
+        "m",
+        "the D435i sees from about 0.1 m; beyond 3 m its depth is too coarse for a 25 mm stroke",
+    )
+    seed: int = rng(
+        0,
+        0,
+        4_294_967_295,
+        "",
+        "the simulator draws from the seed's low 32 bits: a larger seed would repeat a smaller one",
+    )
     paint: str = "orange"  # preset the piece is painted with (perception.paint.PAINT_PRESETS)
-    views: int = 0  # 0: sweep one view per view_step_m of line, survey its full grid
-    view_step_m: float = 0.05  # sweep spacing along the line (~85 % overlap at 0.3 m)
-    survey_spacing_m: float = 0.10  # survey target grid over the piece's top
-    min_elevation_deg: float = 35.0  # cameras stay at least this high above their target
-    frames_per_view: int = 1  # images at 30 Hz while the robot rests at a view
-    max_views: int = 200  # budget of executed views (explore mode safety stop)
-    max_backoff_m: float = 0.15  # free DOF: how far a view may back off along its axis
-    speed_scale: float = 0.25  # share of the Panda's joint speed limits used between views
-    tf_rate_hz: float = 100.0  # /tf and /joint_states rate
+    # 0: sweep one view per view_step_m of line, survey its full grid
+    views: int = rng(0, 0, 10_000, "", "a scan of 10,000 views takes hours of robot time")
+    # sweep spacing along the line (~85 % overlap at 0.3 m)
+    view_step_m: float = rng(
+        0.05, 1e-3, 1.0, "m", "steps under 1 mm repeat one view; over 1 m skip whole pieces"
+    )
+    # survey target grid over the piece's top
+    survey_spacing_m: float = rng(
+        0.10, 0.01, 1.0, "m", "under 10 mm the survey grid of a piece holds thousands of views"
+    )
+    # cameras stay at least this high above their target
+    min_elevation_deg: float = rng(
+        35.0, 0.0, 89.0, "deg", "an elevation above the target's surface (90: straight down only)"
+    )
+    # images at 30 Hz while the robot rests at a view
+    frames_per_view: int = rng(1, 1, 300, "", "300 frames are 10 s at 30 Hz per view")
+    # budget of executed views (explore mode safety stop)
+    max_views: int = rng(200, 1, 10_000, "", "a scan of 10,000 views takes hours of robot time")
+    # free DOF: how far a view may back off along its axis
+    max_backoff_m: float = rng(0.15, 0.0, 1.0, "m", "the Panda reaches 0.855 m")
+    # share of the Panda's joint speed limits used between views
+    speed_scale: float = rng(0.25, 0.01, 1.0, "", "a share of the Panda's joint speed limits")
+    # /tf and /joint_states rate
+    tf_rate_hz: float = rng(100.0, 1.0, 1000.0, "Hz", "the Panda's control loop runs at 1 kHz")
     depth_encoding: str = "16UC1"  # or "32FC1" (float metres: no 1 mm quantisation)
-    object_x_m: float = 0.5  # placement of the piece on the floor, base frame
-    object_y_m: float = 0.0
-    object_yaw_deg: float = 0.0
-    start_fraction: float | None = None  # explore start along the line, 0-1; None: the piece's
+    # placement of the piece on the floor, base frame
+    object_x_m: float = rng(
+        0.5, -2.0, 2.0, "m", "the Panda reaches 0.855 m; 2 m is out of any view"
+    )
+    object_y_m: float = rng(
+        0.0, -2.0, 2.0, "m", "the Panda reaches 0.855 m; 2 m is out of any view"
+    )
+    object_yaw_deg: float = rng(0.0, -360.0, 360.0, "deg", "one turn either way")
+    # explore start along the line, 0-1; None: the piece's
+    start_fraction: float | None = rng(None, 0.0, 1.0, "", "a fraction of the line")
 
 
 @dataclass(frozen=True)
 class EvaluationConfig:
     """The error report of DESIGN.md: reference sampling and coverage threshold."""
 
-    sample_spacing_m: float = 0.001
-    coverage_threshold_m: float = 0.010
+    sample_spacing_m: float = rng(
+        0.001,
+        1e-4,
+        0.1,
+        "m",
+        "the paper samples every 1 mm; under 0.1 mm a 5 m reference holds 50,000+ samples for "
+        "nothing, over 100 mm it misses turns",
+    )
+    coverage_threshold_m: float = rng(
+        0.010,
+        1e-4,
+        1.0,
+        "m",
+        "under 0.1 mm no fit covers anything; over 1 m every path covers every reference",
+    )
 
 
 @dataclass(frozen=True)
@@ -279,7 +762,10 @@ class ScrapcutConfig:
         return _jsonable(dataclasses.asdict(self))
 
     def override(self, section: str, **values: Any) -> ScrapcutConfig:
-        """A copy with ``section``'s fields replaced; ``None`` values mean "not given"."""
+        """A copy with ``section``'s fields replaced; ``None`` values mean "not given".
+
+        The new values are checked (:func:`validate`): ConfigError names the first bad one.
+        """
         given = {k: v for k, v in values.items() if v is not None}
         if not given:
             return self
@@ -288,33 +774,48 @@ class ScrapcutConfig:
 
 
 def update_dataclass(obj: T, values: dict[str, Any], where: str) -> T:
-    """``dataclasses.replace`` with a clear error for unknown names and wrong types."""
+    """``dataclasses.replace`` with a clear error for unknown names, wrong types and values
+    outside their ranges (the section is validated as a whole afterwards)."""
     known = {f.name: f for f in fields(obj)}  # type: ignore[arg-type]
     for name, value in values.items():
         if name not in known:
             raise ConfigError(
                 f"unknown parameter {where}.{name}; known: {', '.join(sorted(known))}"
             )
-        default = getattr(obj, name)
-        if default is not None and value is not None:
-            if isinstance(default, bool):
-                if not isinstance(value, bool):
-                    raise ConfigError(f"{where}.{name} must be true or false, got {value!r}")
-            elif isinstance(default, int | float):
-                if isinstance(value, bool) or not isinstance(value, int | float):
-                    raise ConfigError(f"{where}.{name} must be a number, got {value!r}")
-                if isinstance(default, int) and not isinstance(value, int):
-                    # A count (neighbours, iterations, pixels) reaches libraries refusing floats.
-                    if not float(value).is_integer():
-                        raise ConfigError(f"{where}.{name} must be a whole number, got {value!r}")
-                    values[name] = int(value)
-                elif isinstance(default, float) and isinstance(value, int):
-                    values[name] = float(value)
-            elif isinstance(default, str) and not isinstance(value, str):
-                raise ConfigError(f"{where}.{name} must be a string, got {value!r}")
-        if isinstance(value, list):
-            values[name] = tuple(value)
-    return replace(obj, **values)  # type: ignore[type-var]
+        if value is not None:
+            values[name] = _coerce(value, str(known[name].type), f"{where}.{name}")
+    updated = replace(obj, **values)  # type: ignore[type-var]
+    validate_section(updated, where)
+    return updated
+
+
+def _coerce(value: Any, declared: str, key: str) -> Any:
+    """``value`` as the declared type (``"int | None"``...), or ConfigError naming ``key``."""
+    kind = declared.replace(" | None", "")
+    if kind == "bool":
+        if not isinstance(value, bool):
+            raise ConfigError(f"{key} must be true or false, got {value!r}")
+        return value
+    if kind in ("int", "float"):
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(f"{key} must be a number, got {value!r}")
+        if kind == "float":
+            return float(value)
+        # A count (neighbours, iterations, pixels) reaches libraries refusing floats.
+        if not float(value).is_integer():
+            raise ConfigError(f"{key} must be a whole number, got {value!r}")
+        return int(value)
+    if kind == "str":
+        if not isinstance(value, str):
+            raise ConfigError(f"{key} must be a string, got {value!r}")
+        return value
+    if kind.startswith("tuple"):
+        if not isinstance(value, list | tuple):
+            raise ConfigError(f"{key} must be a list of numbers, got {value!r}")
+        if any(isinstance(v, bool) or not isinstance(v, int | float) for v in value):
+            raise ConfigError(f"{key} must be a list of numbers, got {value!r}")
+        return tuple(float(v) for v in value)
+    return value
 
 
 def load_config(path: str | Path | None = None) -> ScrapcutConfig:
@@ -335,6 +836,8 @@ def load_config(path: str | Path | None = None) -> ScrapcutConfig:
 def config_from_dict(data: dict[str, Any], *, where: str = "config") -> ScrapcutConfig:
     """Defaults updated from a nested dictionary (the shape of :meth:`ScrapcutConfig.to_dict`)."""
     config = ScrapcutConfig()
+    if not isinstance(data, dict):
+        raise ConfigError(f"{where}: expected a table of sections")
     sections = {f.name for f in fields(config)}
     for section, values in data.items():
         if section not in sections:
@@ -345,7 +848,87 @@ def config_from_dict(data: dict[str, Any], *, where: str = "config") -> Scrapcut
             raise ConfigError(f"{where}: [{section}] must be a table")
         current = getattr(config, section)
         config = replace(config, **{section: update_dataclass(current, dict(values), section)})
+    return validate(config)
+
+
+# --------------------------------------------------------------------------- ranges
+
+
+def config_field(section: str, name: str) -> dataclasses.Field[Any]:
+    """The dataclass field of parameter ``section.name`` (KeyError if there is none)."""
+    if section not in ScrapcutConfig.__dataclass_fields__:
+        raise KeyError(section)
+    for f in fields(getattr(ScrapcutConfig(), section)):
+        if f.name == name:
+            return f
+    raise KeyError(f"{section}.{name}")
+
+
+def field_range(section: str, name: str) -> tuple[float, float, str, str]:
+    """(lo, hi, unit, why) declared for ``section.name``; KeyError if it has no range."""
+    f = config_field(section, name)
+    lo, hi = f.metadata[RANGE]
+    return lo, hi, f.metadata[UNIT], f.metadata[WHY]
+
+
+def is_count(section: str, name: str) -> bool:
+    """True if ``section.name`` is declared an int (a count: whole numbers only)."""
+    return str(config_field(section, name).type).replace(" | None", "") == "int"
+
+
+def validate(config: ScrapcutConfig) -> ScrapcutConfig:
+    """Check every parameter of ``config`` against its declared range and the relations
+    between fields; return ``config``. Raises ConfigError naming the first bad value."""
+    for f in fields(config):
+        validate_section(getattr(config, f.name), f.name)
     return config
+
+
+def validate_section(section: Any, where: str) -> None:
+    """:func:`validate` for one stage's dataclass (``where`` names it in messages)."""
+    for f in fields(section):
+        value = getattr(section, f.name)
+        if RANGE in f.metadata and value is not None:
+            _check_range(f, value, f"{where}.{f.name}")
+    for a, b in getattr(section, "ORDERED", ()):
+        va, vb = getattr(section, a), getattr(section, b)
+        if va is not None and vb is not None and va > vb:
+            raise ConfigError(f"{where}.{a} = {va:g} is above {where}.{b} = {vb:g}")
+
+
+def _check_range(f: dataclasses.Field[Any], value: Any, key: str) -> None:
+    bounds = f.metadata[RANGE]
+    unit, why = f.metadata[UNIT], f.metadata[WHY]
+    if isinstance(value, tuple):
+        if isinstance(bounds[0], tuple):  # one range per element
+            if len(value) != len(bounds):
+                raise ConfigError(f"{key} needs {len(bounds)} numbers, got {len(value)}")
+            units = [u.strip() for u in unit.split(",")]
+            for k, (item, (lo, hi)) in enumerate(zip(value, bounds, strict=True)):
+                _check_number(item, lo, hi, units[k] if k < len(units) else "", why, f"{key}[{k}]")
+        else:
+            for k, item in enumerate(value):
+                _check_number(item, bounds[0], bounds[1], unit, why, f"{key}[{k}]")
+        return
+    lo, hi = bounds
+    whole = str(f.type).replace(" | None", "") == "int"
+    _check_number(value, lo, hi, unit, why, key, whole=whole)
+
+
+def _check_number(
+    value: Any, lo: float, hi: float, unit: str, why: str, key: str, *, whole: bool = False
+) -> None:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ConfigError(f"{key} must be a number, got {value!r}")
+    if not math.isfinite(value):
+        raise ConfigError(f"{key} must be a finite number, got {value}")
+    if whole and not float(value).is_integer():
+        raise ConfigError(f"{key} must be a whole number, got {value!r}")
+    # A bound typed in another unit (mm on the command line) may round by an ulp.
+    slack = 1e-9 * max(abs(lo), abs(hi))
+    if not lo - slack <= value <= hi + slack:
+        units = f" {unit}" if unit else ""
+        raise ConfigError(f"{key} = {value:g}{units} is outside {lo:g} to {hi:g}{units}: {why}")
 
 
 def _jsonable(value: Any) -> Any:

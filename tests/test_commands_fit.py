@@ -173,6 +173,8 @@ def test_errors_are_one_line_and_leave_no_output(
 def test_tool_path_options_are_checked_before_the_recording_is_read(
     scene: tuple[Path, np.ndarray],
 ) -> None:
+    from dataclasses import replace
+
     from scrapcut_cli.config import ScrapcutConfig
     from scrapcut_cli.errors import ToolpathError
     from scrapcut_cli.toolpath.recipe import fit_recording
@@ -184,7 +186,8 @@ def test_tool_path_options_are_checked_before_the_recording_is_read(
         ({"thickness_mm": 900.0}, "outside the mild_steel chart"),
         ({"spacing_m": 0.0}, "spacing_m must be positive"),
     ):
-        config = ScrapcutConfig().override("toolpath", **option)
+        # replace, not override: spacing 0 is refused by the configuration already.
+        config = replace(ScrapcutConfig(), toolpath=replace(ScrapcutConfig().toolpath, **option))
         with pytest.raises(ToolpathError, match=message):
             fit_recording(
                 rec,

@@ -84,9 +84,11 @@ def test_every_stage_option_reaches_its_config_field_in_si_units() -> None:
             value = expected = default + 1
         elif isinstance(default, str):
             continue  # a choice; covered by the commands' own tests
-        else:
-            value = 7.0
-            expected = pytest.approx(7.0 * factor)
+        else:  # a value inside the option's range, away from the default
+            value = 1.25 * default / factor
+            if not 0 < value <= kind.max:
+                value = 0.5 * (kind.min + kind.max)
+            expected = pytest.approx(value * factor)
         config = apply_stage_options(base, {name: value})
         assert getattr(getattr(config, stage), field_name) == expected, flag
         assert apply_stage_options(base, {name: None}) == base

@@ -35,7 +35,9 @@ ORANGE = PAINT_PRESETS["orange"].hsv
 
 
 def _config(**exploration: Any) -> ScrapcutConfig:
-    return ScrapcutConfig().override("exploration", **exploration)
+    # replace, not override: some tests build values a user could not, for the planner's checks.
+    config = ScrapcutConfig()
+    return replace(config, exploration=replace(config.exploration, **exploration))
 
 
 def _always(T: np.ndarray) -> bool:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -233,7 +234,8 @@ def test_what_if_parameters_change_the_outcome(survey: Path) -> None:
 def test_what_if_refuses_bad_parameters_before_reading_frames(survey: Path) -> None:
     # Before, every frame was perceived first and the planner refused the range at the end.
     read: list[int] = []
-    bad = ScrapcutConfig().override("exploration", min_distance_m=0.5, max_distance_m=0.3)
+    config = ScrapcutConfig()  # replace, not override: a value a user could not give
+    bad = replace(config, exploration=replace(config.exploration, min_distance_m=0.5))
     with pytest.raises(ExplorationError, match="max_distance_m"):
         what_if(survey, config=bad, progress=lambda done, total: read.append(done))
     assert read == []

@@ -1,4 +1,10 @@
-"""Options shared by several subcommands, and turning them into a :class:`ScrapcutConfig`."""
+"""Options shared by several subcommands, and turning them into a :class:`ScrapcutConfig`.
+
+Every numeric option is bounded: an option that sets a configuration parameter takes the
+parameter's declared range (:func:`config_type`, scaled to the option's unit, e.g. millimetres);
+any other numeric option names its own finite range (:func:`bounded`). Non-finite numbers
+(inf, nan) are refused by both. ``tests/test_config_ranges.py`` checks every command's options.
+"""
 
 from __future__ import annotations
 
@@ -8,9 +14,83 @@ from typing import Any, TypeVar
 
 import click
 
-from scrapcut_cli.config import ScrapcutConfig, load_config
+from scrapcut_cli.config import ScrapcutConfig, field_range, is_count, load_config
 
 F = TypeVar("F", bound=Callable[..., Any])
+
+
+class _Finite(click.ParamType):
+    """Mixin for click's ranges: refuse inf and nan, and say why a bound is there."""
+
+    why: str = ""
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        text = str(value).strip().lower().lstrip("+-")
+        if text in ("inf", "infinity", "nan"):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        try:
+            return super().convert(value, param, ctx)
+        except click.BadParameter as exc:
+            if not self.why or "range" not in exc.message:
+                raise
+            self.fail(f"{exc.message.rstrip('.')}: {self.why}", param, ctx)
+
+
+class BoundedFloat(_Finite, click.FloatRange):
+    """A finite float within [min, max] (both required)."""
+
+    def __init__(self, lo: float, hi: float, why: str = "") -> None:
+        super().__init__(lo, hi)
+        self.why = why
+
+
+class BoundedInt(_Finite, click.IntRange):
+    """A whole number within [min, max] (both required)."""
+
+    def __init__(self, lo: int, hi: int, why: str = "") -> None:
+        super().__init__(lo, hi)
+        self.why = why
+
+
+class ConfigFloat(BoundedFloat):
+    """The range of configuration parameter ``key`` in the option's unit (value x scale = SI)."""
+
+    def __init__(self, key: str, scale: float = 1.0) -> None:
+        lo, hi, _, why = field_range(*key.split("."))
+        super().__init__(_in_unit(lo, scale), _in_unit(hi, scale), why)
+        self.key, self.scale = key, scale
+
+
+class ConfigInt(BoundedInt):
+    """The range of the count parameter ``key``."""
+
+    def __init__(self, key: str) -> None:
+        lo, hi, _, why = field_range(*key.split("."))
+        super().__init__(int(lo), int(hi), why)
+        self.key, self.scale = key, 1.0
+
+
+def _in_unit(value: float, scale: float) -> float:
+    """A bound in the option's unit, without the binary noise of the division (0.1 mm)."""
+    return float(f"{value / scale:.12g}")
+
+
+def config_type(key: str, scale: float = 1.0) -> ConfigFloat | ConfigInt:
+    """The click type of an option setting ``section.field`` (``scale``: option unit in SI,
+    1e-3 for millimetres): its declared range, finite numbers only."""
+    if is_count(*key.split(".")):
+        if scale != 1.0:
+            raise ValueError(f"{key} is a count; it has no unit to scale")
+        return ConfigInt(key)
+    return ConfigFloat(key, scale)
+
+
+def bounded(lo: float, hi: float, why: str = "") -> BoundedFloat | BoundedInt:
+    """The click type of a numeric option that is no configuration parameter: finite, in
+    [lo, hi] (ints give a whole-number option)."""
+    if isinstance(lo, int) and isinstance(hi, int):
+        return BoundedInt(lo, hi, why)
+    return BoundedFloat(float(lo), float(hi), why)
 
 
 def mm_to_m(value: float | None) -> float | None:
@@ -42,7 +122,7 @@ def recording_options(f: F) -> F:
         ),
         click.option(
             "--sync-tolerance-ms",
-            type=click.FloatRange(min=0.0),
+            type=config_type("recording.sync_tolerance_s", 1e-3),
             default=None,
             help="Max colour/depth stamp difference for a pair [ms] (default 20).",
         ),
@@ -135,7 +215,7 @@ _STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
         "perception",
         "min_depth_m",
         1e-3,
-        click.FloatRange(min=0.0),
+        config_type("perception.min_depth_m", 1e-3),
         "Nearest usable depth [mm] (default 100).",
     ),
     (
@@ -144,7 +224,7 @@ _STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
         "perception",
         "max_depth_m",
         1e-3,
-        click.FloatRange(min=0.0, min_open=True),
+        config_type("perception.max_depth_m", 1e-3),
         "Farthest usable depth [mm] (default 2000).",
     ),
     (
@@ -153,7 +233,7 @@ _STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
         "perception",
         "flying_pixel_ratio",
         1.0,
-        click.FloatRange(min=0.0, min_open=True),
+        config_type("perception.flying_pixel_ratio"),
         "Drop pixels whose depth jumps by more than this share of it to a neighbour "
         "(default 0.03).",
     ),
@@ -163,7 +243,7 @@ _STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
         "perception",
         "min_paint_neighbors",
         1,
-        click.IntRange(0, 4),
+        config_type("perception.min_paint_neighbors"),
         "Drop paint pixels with fewer of 4 neighbours also paint (default 3; 0: off).",
     ),
     (
@@ -172,7 +252,7 @@ _STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
         "perception",
         "voxel_size_m",
         1e-3,
-        click.FloatRange(min=0.0, min_open=True),
+        config_type("perception.voxel_size_m", 1e-3),
         "Per-frame paint downsampling voxel [mm] (default 2).",
     ),
     (
@@ -181,7 +261,7 @@ _STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
         "perception",
         "sor_neighbors",
         1,
-        click.IntRange(min=0),
+        config_type("perception.sor_neighbors"),
         "Statistical outlier removal: neighbours per point (default 20; 0: off).",
     ),
     (
@@ -190,7 +270,7 @@ _STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
         "perception",
         "sor_std_ratio",
         1.0,
-        click.FloatRange(min=0.0, min_open=True),
+        config_type("perception.sor_std_ratio"),
         "Statistical outlier removal: standard deviations allowed (default 2.0).",
     ),
     (
@@ -199,7 +279,7 @@ _STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
         "perception",
         "min_paint_area_m2",
         1e-6,
-        click.FloatRange(min=0.0),
+        config_type("perception.min_paint_area_m2", 1e-6),
         "Drop paint blobs covering less surface than this, e.g. overspray specks [mm²] "
         "(default 25; 0: off).",
     ),
@@ -209,7 +289,7 @@ _STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
         "perception",
         "min_paint_points",
         1,
-        click.IntRange(min=0),
+        config_type("perception.min_paint_points"),
         "Fewer paint voxels in a frame after cleaning: frame skipped (default 20).",
     ),
     (
@@ -218,7 +298,7 @@ _STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
         "perception",
         "surface_band_m",
         1e-3,
-        click.FloatRange(min=0.0),
+        config_type("perception.surface_band_m", 1e-3),
         "Width of the surface kept around the paint [mm] (default 40; 0: none).",
     ),
     (
@@ -227,7 +307,7 @@ _STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
         "perception",
         "surface_voxel_m",
         1e-3,
-        click.FloatRange(min=0.0, min_open=True),
+        config_type("perception.surface_voxel_m", 1e-3),
         "Surface downsampling voxel [mm] (default 4).",
     ),
     (
@@ -236,7 +316,7 @@ _STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
         "stitch",
         "voxel_size_m",
         1e-3,
-        click.FloatRange(min=0.0, min_open=True),
+        config_type("stitch.voxel_size_m", 1e-3),
         "Stitching voxel [mm]: the unit of the cloud's size (default 2).",
     ),
     (
@@ -263,7 +343,7 @@ _STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
         "stitch",
         "icp_max_distance_m",
         1e-3,
-        click.FloatRange(min=0.0, min_open=True),
+        config_type("stitch.icp_max_distance_m", 1e-3),
         "ICP correspondence distance [mm] (default 10).",
     ),
     (
@@ -272,7 +352,7 @@ _STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
         "stitch",
         "icp_max_translation_m",
         1e-3,
-        click.FloatRange(min=0.0),
+        config_type("stitch.icp_max_translation_m", 1e-3),
         "Largest ICP correction accepted, at the frame's centre [mm] (default 5).",
     ),
     (
@@ -281,7 +361,7 @@ _STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
         "stitch",
         "icp_max_rotation_deg",
         1,
-        click.FloatRange(min=0.0),
+        config_type("stitch.icp_max_rotation_deg"),
         "Largest ICP rotation accepted [deg] (default 2).",
     ),
     (
@@ -290,7 +370,7 @@ _STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
         "stitch",
         "icp_max_iterations",
         1,
-        click.IntRange(min=1),
+        config_type("stitch.icp_max_iterations"),
         "ICP iterations (default 30).",
     ),
     (
@@ -299,7 +379,7 @@ _STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
         "stitch",
         "icp_min_overlap",
         1,
-        click.FloatRange(0.0, 1.0),
+        config_type("stitch.icp_min_overlap"),
         "Share of a frame's paint near the cloud needed to try ICP (default 0.3).",
     ),
 ]
@@ -334,12 +414,19 @@ def split_stage_options(options: dict[str, Any]) -> tuple[dict[str, Any], dict[s
 
 
 def apply_stage_options(config: ScrapcutConfig, values: dict[str, Any]) -> ScrapcutConfig:
-    """``config`` with perception/stitch option values applied (None: not given), in SI units."""
+    """``config`` with perception/stitch option values applied (None: not given), in SI units.
+
+    One override per stage, so that related options (``--min-depth-mm`` and ``--max-depth-mm``)
+    are checked together.
+    """
+    by_stage: dict[str, dict[str, Any]] = {}
     for _, name, stage, field_name, factor, _, _ in _STAGE_OPTIONS:
         value = values.get(name)
         if value is None:
             continue
         if isinstance(value, float) and factor != 1:
             value = value * factor
-        config = config.override(stage, **{field_name: value})
+        by_stage.setdefault(stage, {})[field_name] = value
+    for stage, given in by_stage.items():
+        config = config.override(stage, **given)
     return config

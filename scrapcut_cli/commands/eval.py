@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import click
 
 from scrapcut_cli.commands._console import err, print_table
-from scrapcut_cli.commands._options import build_config, config_option
+from scrapcut_cli.commands._options import build_config, config_option, config_type
 
 if TYPE_CHECKING:
     from rich.table import Table
@@ -58,7 +58,7 @@ _SUFFIX_FORMATS = {".md": "markdown", ".markdown": "markdown", ".csv": "csv", ".
 )
 @click.option(
     "--coverage-mm",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=config_type("evaluation.coverage_threshold_m", 1e-3),
     default=None,
     help="Coverage threshold [mm] (default 10).",
 )

@@ -9,8 +9,10 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from scrapcut_cli.commands._options import (
+    bounded,
     build_config,
     config_option,
+    config_type,
     mm_to_m,
     paint_options,
     recording_options,
@@ -40,31 +42,31 @@ METHODS = ("nurbs", "skeleton")
 )
 @click.option(
     "--delta-size",
-    type=click.IntRange(min=0),
+    type=config_type("exploration.delta_size"),
     default=None,
     help="What-if: new paint voxels at or below which an end is declared (default 20).",
 )
 @click.option(
     "--step-mm",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=config_type("exploration.step_m", 1e-3),
     default=None,
     help="What-if: next target this far beyond the fitted curve's end [mm] (default 60).",
 )
 @click.option(
     "--min-distance-mm",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=config_type("exploration.min_distance_m", 1e-3),
     default=None,
     help="What-if: nearest camera distance tried [mm] (default 200).",
 )
 @click.option(
     "--max-distance-mm",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=config_type("exploration.max_distance_m", 1e-3),
     default=None,
     help="What-if: farthest camera distance tried [mm] (default 450).",
 )
 @click.option(
     "--max-steps",
-    type=click.IntRange(min=1),
+    type=config_type("exploration.max_steps"),
     default=None,
     help="What-if: frames observed before stopping with 'budget' (default 60).",
 )
@@ -75,21 +77,21 @@ METHODS = ("nurbs", "skeleton")
 )
 @click.option(
     "--match-distance-mm",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=bounded(0.1, 2000.0, "a recorded view over 2 m from the planned one shows other things"),
     default=100.0,
     show_default=True,
     help="What-if: a recorded frame answers a planned view within this camera distance [mm].",
 )
 @click.option(
     "--match-angle-deg",
-    type=click.FloatRange(min=0.0, max=180.0, min_open=True),
+    type=bounded(0.1, 180.0, "an angle between optical axes"),
     default=30.0,
     show_default=True,
     help="What-if: ...and within this angle between the optical axes [deg].",
 )
 @click.option(
     "--start-frame",
-    type=click.IntRange(min=0),
+    type=bounded(0, 10_000_000, "a frame index"),
     default=None,
     help="What-if: frame index of the initial view (default: the frame showing most paint).",
 )

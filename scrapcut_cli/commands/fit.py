@@ -12,6 +12,7 @@ from scrapcut_cli.commands._options import (
     apply_stage_options,
     build_config,
     config_option,
+    config_type,
     mm_to_m,
     paint_options,
     perception_options,
@@ -56,38 +57,40 @@ METHODS = ("nurbs", "skeleton")
 @click.option(
     "--leaf-size",
     "leaf_size_mm",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=config_type("skeleton.leaf_size_m", 1e-3),
     default=None,
     help="Skeleton voxel (leaf) size [mm] (default 5, the paper's).",
 )
 @click.option(
     "--smoothness",
-    type=click.FloatRange(min=0.0),
+    type=config_type("nurbs.smoothness"),
     default=None,
     help="NURBS smoothness weight w (default 1.0, the paper's).",
 )
 @click.option(
     "--control-points",
-    type=click.IntRange(min=2),
+    type=config_type("nurbs.control_points"),
     default=None,
     help="NURBS control points (default: scales with the curve length).",
 )
-@click.option("--degree", type=click.IntRange(1, 5), default=None, help="NURBS degree (default 3).")
+@click.option(
+    "--degree", type=config_type("nurbs.degree"), default=None, help="NURBS degree (default 3)."
+)
 @click.option(
     "--spacing-mm",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=config_type("toolpath.spacing_m", 1e-3),
     default=None,
     help="Set-point spacing along the curve [mm] (default 5).",
 )
 @click.option(
     "--standoff-mm",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=config_type("toolpath.standoff_m", 1e-3),
     default=None,
     help="Torch tip distance from the surface [mm] (default 8).",
 )
 @click.option(
     "--normal-radius-mm",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=config_type("toolpath.normal_radius_m", 1e-3),
     default=None,
     help="Surface neighbourhood for normals [mm] (default 15).",
 )
@@ -98,25 +101,25 @@ METHODS = ("nurbs", "skeleton")
 )
 @click.option(
     "--thickness-mm",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=config_type("toolpath.thickness_mm"),
     default=None,
     help="Plate thickness [mm] for the cutting speed (default 10).",
 )
 @click.option(
     "--max-tilt-deg",
-    type=click.FloatRange(min=0.0, max=89.0),
+    type=config_type("toolpath.max_tilt_deg"),
     default=None,
     help="Largest torch tilt from the normal to avoid a collision [deg] (default 20).",
 )
 @click.option(
     "--torch-length-mm",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=config_type("toolpath.torch_length_m", 1e-3),
     default=None,
     help="Torch body length for the collision check [mm] (default 150).",
 )
 @click.option(
     "--torch-radius-mm",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=config_type("toolpath.torch_radius_m", 1e-3),
     default=None,
     help="Torch body radius for the collision check [mm] (default 12).",
 )

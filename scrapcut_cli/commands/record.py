@@ -7,7 +7,13 @@ from typing import Any
 
 import click
 
-from scrapcut_cli.commands._options import build_config, config_option, mm_to_m, paint_options
+from scrapcut_cli.commands._options import (
+    build_config,
+    config_option,
+    config_type,
+    mm_to_m,
+    paint_options,
+)
 
 MODES = ("sweep", "survey", "explore")
 NOISES = ("ideal", "d435i", "yard")
@@ -42,38 +48,42 @@ METHODS = ("nurbs", "skeleton")
     help="Sensor model: exact, a D435i, or a D435i in a scrap yard (default d435i).",
 )
 @paint_options
-@click.option("--seed", type=int, default=None, help="Random seed; same seed, same bytes.")
-@click.option("--width", type=click.IntRange(min=16), default=None, help="Image width [px] (640).")
 @click.option(
-    "--height", type=click.IntRange(min=12), default=None, help="Image height [px] (480)."
+    "--seed", type=config_type("sim.seed"), default=None, help="Random seed; same seed, same bytes."
+)
+@click.option(
+    "--width", type=config_type("sim.width"), default=None, help="Image width [px] (640)."
+)
+@click.option(
+    "--height", type=config_type("sim.height"), default=None, help="Image height [px] (480)."
 )
 @click.option(
     "--views",
-    type=click.IntRange(min=0),
+    type=config_type("sim.views"),
     default=None,
     help="Number of views (sweep / survey); 0: one per 50 mm of line / the full survey.",
 )
 @click.option(
     "--frames-per-view",
-    type=click.IntRange(min=1),
+    type=config_type("sim.frames_per_view"),
     default=None,
     help="Images captured at each view, at 30 Hz (default 1).",
 )
 @click.option(
     "--stroke-width-mm",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=config_type("sim.stroke_width_m", 1e-3),
     default=None,
     help="Spray stroke width [mm] (default 25).",
 )
 @click.option(
     "--distance-mm",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=config_type("sim.view_distance_m", 1e-3),
     default=None,
     help="Camera distance to the line [mm] (default 300).",
 )
 @click.option(
     "--start-fraction",
-    type=click.FloatRange(min=0.0, max=1.0),
+    type=config_type("sim.start_fraction"),
     default=None,
     help="Explore mode: where along the line (0-1) the first view looks, as a worker would "
     "point the robot (default: the middle; 0.2 on slanted, on one face).",

@@ -11,7 +11,7 @@ from pathlib import Path
 import click
 
 from scrapcut_cli.commands._console import err, out
-from scrapcut_cli.commands._options import build_config, config_option
+from scrapcut_cli.commands._options import bounded, build_config, config_option, config_type
 
 #: With these defaults and the simulator's (640×480, explore) the paper's five objects × two
 #: methods take well under the issue's 3 minutes with two jobs on a 2-core machine (about 15 s
@@ -58,28 +58,33 @@ def _names(values: tuple[str, ...]) -> list[str]:
     help="Scan by exploration (Algorithm 1, the paper's method) or by a pre-planned sweep "
     "(default: explore; with --config, the file's sim.mode).",
 )
-@click.option("--seed", type=int, default=None, help="Simulator seed (default 0).")
+@click.option(
+    "--seed", type=config_type("sim.seed"), default=None, help="Simulator seed (default 0)."
+)
 @click.option(
     "--jobs",
-    type=click.IntRange(min=1),
+    type=bounded(1, 1024, "worker processes"),
     default=None,
     help=f"Objects run in parallel processes (default: {DEFAULT_JOBS}, at most the cores).",
 )
 @click.option(
-    "--width", type=click.IntRange(min=16), default=None, help="Image width [px] (default 640)."
+    "--width", type=config_type("sim.width"), default=None, help="Image width [px] (default 640)."
 )
 @click.option(
-    "--height", type=click.IntRange(min=16), default=None, help="Image height [px] (default 480)."
+    "--height",
+    type=config_type("sim.height"),
+    default=None,
+    help="Image height [px] (default 480).",
 )
 @click.option(
     "--leaf-size-mm",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=config_type("skeleton.leaf_size_m", 1e-3),
     default=None,
     help="Skeleton leaf size [mm] (default 5, the paper's).",
 )
 @click.option(
     "--retry-leaf-mm",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=config_type("skeleton.leaf_size_m", 1e-3),
     default=20.0,
     show_default=True,
     help="Leaf size [mm] of the one retry when the skeleton breaks (the paper's basket).",
