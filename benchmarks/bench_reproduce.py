@@ -1,8 +1,8 @@
 """Wall time of ``scrapcut reproduce`` with the defaults of ``make demo`` (target: < 180 s for
-5 objects × 2 methods with ``--jobs 2`` on a 2-core machine), the time of each stage per object,
-and the Table I figures it produced.
+5 objects × 2 methods on a local Dask cluster of 2 workers on a 2-core machine), the time of
+each stage per object, and the Table I figures it produced.
 
-    .venv/bin/python benchmarks/bench_reproduce.py [--repeat N] [--jobs N] [--objects a,b]
+    .venv/bin/python benchmarks/bench_reproduce.py [--repeat N] [--workers N] [--objects a,b]
                                                    [--width W --height H] [--leaf-sweep-mm L]
 
 Prints the median wall time over ``--repeat`` runs (default 1: one run takes up to minutes) and the
@@ -17,9 +17,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from scrapcut_cli.commands.reproduce import DEFAULT_JOBS, DEFAULT_LEAF_SWEEP
+from scrapcut_cli.commands.reproduce import DEFAULT_LEAF_SWEEP
 from scrapcut_cli.config import ScrapcutConfig, SimConfig
-from scrapcut_cli.evaluation.reproduce import (
+from scrapcut_cli.pipeline.engine import Engine, default_workers
+from scrapcut_cli.pipeline.reproduce import (
     PAPER_OBJECTS,
     ReproduceResult,
     machine_description,
@@ -32,7 +33,7 @@ TARGET_S = 180.0
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=1)
-    parser.add_argument("--jobs", type=int, default=DEFAULT_JOBS)
+    parser.add_argument("--workers", type=int, default=default_workers())
     parser.add_argument("--objects", default=",".join(PAPER_OBJECTS))
     parser.add_argument("--methods", default="nurbs,skeleton")
     parser.add_argument("--width", type=int, default=SimConfig().width)
@@ -54,7 +55,7 @@ def main() -> None:
     print(f"machine: {machine_description()}")
     print(
         f"reproduce: {len(objects)} objects x {len(methods)} methods, {args.width}x{args.height}"
-        f" px, {args.mode} mode, jobs {args.jobs}, leaf sweep {args.leaf_sweep_mm} mm,"
+        f" px, {args.mode} mode, workers {args.workers}, leaf sweep {args.leaf_sweep_mm} mm,"
         f" {args.repeat} run(s)"
     )
     walls = []
@@ -62,14 +63,15 @@ def main() -> None:
     for _ in range(args.repeat):
         with tempfile.TemporaryDirectory() as tmp:
             t0 = time.perf_counter()
-            result = reproduce(
-                Path(tmp) / "out",
-                objects=objects,
-                methods=methods,
-                config=config,
-                jobs=args.jobs,
-                leaf_sweep_m=sweep,
-            )
+            with Engine(workers=args.workers) as engine:  # the cluster's start-up is counted
+                result = reproduce(
+                    Path(tmp) / "out",
+                    objects=objects,
+                    methods=methods,
+                    config=config,
+                    engine=engine,
+                    leaf_sweep_m=sweep,
+                )
             walls.append(time.perf_counter() - t0)
     assert result is not None
     print("\nstage times of the last run [s]:")

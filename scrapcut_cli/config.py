@@ -27,6 +27,7 @@ parameter without a range.
 from __future__ import annotations
 
 import dataclasses
+import enum
 import math
 import tomllib
 from dataclasses import dataclass, field, fields, replace
@@ -51,6 +52,28 @@ def rng(default: T, lo: float, hi: float, unit: str, why: str) -> T:
         raise ValueError(f"empty range [{lo}, {hi}]")
     meta = {RANGE: (lo, hi), UNIT: unit, WHY: why}
     return field(default=default, metadata=meta)
+
+
+class FitMethod(enum.StrEnum):
+    """The curve models (``fitting``): an open NURBS or a 3-D skeleton. The one list of methods:
+    every command, config check and report imports it. A member is its string (``"nurbs"``)."""
+
+    NURBS = "nurbs"
+    SKELETON = "skeleton"
+
+
+class ScanMode(enum.StrEnum):
+    """How the simulator chooses views (``SimConfig.mode``). ``sweep`` views follow the true
+    reference line, so its results are labelled "oracle views" in every report."""
+
+    SWEEP = "sweep"
+    SURVEY = "survey"
+    EXPLORE = "explore"
+
+
+def choice_names(choices: type[enum.StrEnum]) -> tuple[str, ...]:
+    """The members' strings in declaration order, e.g. ``("nurbs", "skeleton")``."""
+    return tuple(member.value for member in choices)
 
 
 @dataclass(frozen=True)

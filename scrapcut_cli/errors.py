@@ -37,6 +37,10 @@ class EvaluationError(ScrapcutError):
     """No reference, unreadable path file."""
 
 
+class PipelineError(ScrapcutError):
+    """A job, batch or reproduce run cannot start: bad inputs, grid or manifest, no cluster."""
+
+
 class SimError(ScrapcutError):
     """Unknown object, infeasible robot pose, simulator failure."""
 

@@ -147,7 +147,18 @@ def test_output_writes_the_path_file_of_the_observed_frames(
     result = _run("explore", path, "-o", out, "--json")
     assert result.exit_code == 0, result.output
     assert json.loads(result.stdout)["output"] == str(out)
+    summary = json.loads(result.stdout)
+    # Issue 20: the error report beside the path file, the figures `scrapcut eval` computes.
+    report = json.loads((tmp_path / "explored.error.json").read_text())
+    again = _run("eval", out, "--format", "json")
+    assert again.exit_code == 0, again.output
+    (row,) = json.loads(again.stdout)
+    for key in ("mean_mm", "sd_mm", "min_mm", "max_mm", "coverage", "reverse_max_mm"):
+        assert report[key] == pytest.approx(row[key], abs=1e-9), key
+        assert summary["error"][key] == pytest.approx(row[key], abs=1e-9), key
+    assert summary["error_report"] == str(tmp_path / "explored.error.json")
     curve, cutting, data = read_path_file(out)
+    assert data["error_report"] == "explored.error.json"
     assert data["source"]["frames_used"] == len(loop.frames)
     assert data["source"]["path"] == str(path)
     assert data["method"]["name"] == "nurbs" and len(cutting) > 100

@@ -102,6 +102,8 @@ def test_fit_writes_the_path_file_and_every_export(
         assert curve.nurbs is None
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
         "path.csv",
+        "path.error.json",  # the scene carries its reference: every result has its error
+        "path.error.md",
         "path.json",
         "path.mcap",
     ]
@@ -122,6 +124,82 @@ def _check_mcap(path: Path, setpoints: int) -> None:
                 poses = len(msg.poses)
     assert set(counts) == set(MCAP_TOPICS.values())
     assert poses == setpoints
+
+
+def _eval_row(path_file: Path, *extra: object) -> dict[str, object]:
+    result = _run("eval", path_file, "--format", "json", *extra)
+    assert result.exit_code == 0, result.output
+    (row,) = json.loads(result.stdout)
+    return dict(row)
+
+
+ERROR_KEYS = ("mean_mm", "sd_mm", "min_mm", "max_mm", "coverage", "reverse_max_mm")
+
+
+def test_fit_writes_the_error_report_that_eval_computes(
+    scene: tuple[Path, np.ndarray], tmp_path: Path
+) -> None:
+    """Issue 20: a recording with its reference gives PATH.error.json = `scrapcut eval PATH`."""
+    rec, _ = scene
+    out = tmp_path / "x.json"
+    result = _run("fit", rec, "--method", "skeleton", "-o", out, "--json")
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.stdout)
+    report = json.loads((tmp_path / "x.error.json").read_text())
+    again = _eval_row(out)
+    assert report["schema"] == "scrapcut.error/v1" and report["path_file"] == "x.json"
+    assert set(again) <= set(report)  # an eval row's keys, and provenance besides
+    assert report["object"] == again["object"] == "synthetic_cylinder"
+    for key in ERROR_KEYS:
+        assert report[key] == pytest.approx(again[key], abs=1e-9), key
+        assert summary["error"][key] == pytest.approx(again[key], abs=1e-9), key
+    assert 0.0 < report["mean_mm"] < 3.0 and report["coverage"] > 0.9  # a real measurement
+    assert summary["error_report"] == str(tmp_path / "x.error.json")
+    assert json.loads(out.read_text())["error_report"] == "x.error.json"
+    markdown = (tmp_path / "x.error.md").read_text()
+    assert "| synthetic_cylinder | skeleton 5 mm |" in markdown
+    assert f"{report['mean_mm']:.2f}" in markdown
+    # The table on screen shows the figures too.
+    table = _run("fit", rec, "-o", tmp_path / "y.json")
+    assert "error vs reference" in table.stdout and "coverage" in table.stdout
+
+
+def test_no_reference_or_no_eval_writes_no_report(tmp_path: Path) -> None:
+    reference = cylinder_top_line(length_m=0.2)
+    camera = small_camera(160, 120)
+    frames = [
+        render_cylinder(camera, top_view(x, height_m=0.25), reference, index=i)
+        for i, x in enumerate(np.linspace(-0.08, 0.08, 4))
+    ]
+    bare = tmp_path / "real_scan.mcap"  # as a real robot records: no /scrapcut/reference
+    write_scene_recording(bare, frames)
+    result = _run("fit", bare, "-o", tmp_path / "a.json", "--json")
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.stdout)
+    assert summary["error"] is None and summary["error_report"] is None
+    assert summary["error_status"] == "no reference: error not computed"
+    assert "no reference: error not computed" in _run("fit", bare, "-o", tmp_path / "b.json").stdout
+    assert "error_report" not in json.loads((tmp_path / "a.json").read_text())
+
+    # A measured reference (probed points as CSV) gives the real-robot user the same report.
+    probed = tmp_path / "probed.csv"
+    probed.write_text(
+        "x,y,z\n" + "\n".join(",".join(f"{v!r}" for v in p.tolist()) for p in reference[::10])
+    )
+    result = _run("fit", bare, "-o", tmp_path / "c.json", "--reference", probed, "--json")
+    assert result.exit_code == 0, result.output
+    report = json.loads((tmp_path / "c.error.json").read_text())
+    assert report["reference"] == str(probed)
+    again = _eval_row(tmp_path / "c.json", "--reference", probed)
+    for key in ERROR_KEYS:
+        assert report[key] == pytest.approx(again[key], abs=1e-9), key
+    assert report["coverage"] > 0.9
+
+    result = _run("fit", bare, "-o", tmp_path / "d.json", "--reference", probed, "--no-eval")
+    assert result.exit_code == 2  # contradictory
+    result = _run("fit", bare, "-o", tmp_path / "d.json", "--no-eval", "--json")
+    assert json.loads(result.stdout)["error_status"] == "error not computed (--no-eval)"
+    assert sorted(p.name for p in tmp_path.glob("d.*")) == ["d.json"]
 
 
 def test_table_output_and_options_reach_the_path_file(
@@ -175,26 +253,24 @@ def test_tool_path_options_are_checked_before_the_recording_is_read(
 ) -> None:
     from dataclasses import replace
 
-    from scrapcut_cli.config import ScrapcutConfig
-    from scrapcut_cli.errors import ToolpathError
-    from scrapcut_cli.toolpath.recipe import fit_recording
+    from scrapcut_cli.config import FitMethod, ScrapcutConfig
+    from scrapcut_cli.errors import EvaluationError, ScrapcutError, ToolpathError
+    from scrapcut_cli.pipeline.job import Job, Pipeline
 
     rec, _ = scene
     frames_read: list[int] = []
-    for option, message in (
-        ({"material": "unobtainium"}, "unknown material"),
-        ({"thickness_mm": 900.0}, "outside the mild_steel chart"),
-        ({"spacing_m": 0.0}, "spacing_m must be positive"),
+    for option, error, message in (
+        ({"material": "unobtainium"}, ToolpathError, "unknown material"),
+        ({"thickness_mm": 900.0}, ToolpathError, "outside the mild_steel chart"),
+        ({"spacing_m": 0.0}, ToolpathError, "spacing_m must be positive"),
+        ({}, EvaluationError, "reference not found"),
     ):
         # replace, not override: spacing 0 is refused by the configuration already.
         config = replace(ScrapcutConfig(), toolpath=replace(ScrapcutConfig().toolpath, **option))
-        with pytest.raises(ToolpathError, match=message):
-            fit_recording(
-                rec,
-                method="nurbs",
-                config=config,
-                progress=lambda done, _: frames_read.append(done),
-            )
+        job = Job(rec, FitMethod.NURBS, config, reference=Path("no/such/probed.csv"))
+        with pytest.raises(error, match=message):
+            Pipeline(job, progress=lambda done, _: frames_read.append(done)).run()
+        assert issubclass(error, ScrapcutError)
     assert frames_read == []  # failed at once, not after stitching every frame
 
 

@@ -22,8 +22,8 @@ def small_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Result]:
     """Cylinder and air chamber, both methods, at 320×240, a two-leaf sweep (about 10 s)."""
     out = tmp_path_factory.mktemp("reproduce") / "results"
     result = run("reproduce", "--objects", "cylinder,air_chamber", "--mode", "sweep",
-                 "--width", 320, "--height", 240, "--jobs", 1, "--leaf-sweep-mm", "5,20",
-                 "-o", out)  # fmt: skip
+                 "--width", 320, "--height", 240, "--scheduler", "inline",
+                 "--leaf-sweep-mm", "5,20", "-o", out)  # fmt: skip
     return out, result
 
 
@@ -84,8 +84,15 @@ def test_reproduce_writes_every_output(small_run: tuple[Path, Result]) -> None:
     assert sweep[("cylinder", 5.0)]["mean_mm"] == rows[("cylinder", "skeleton")]["mean_mm"]
 
     markdown = (out / "report.md").read_text()
-    assert "scrapcut reproduce" in markdown and "| cylinder | nurbs |" in markdown
-    assert "Skeleton leaf-size sweep" in markdown and "| cylinder | skeleton 20 mm |" in markdown
+    # A sweep's views follow the true line: its rows say so in every report.
+    assert "scrapcut reproduce" in markdown and "| cylinder | nurbs (oracle views) |" in markdown
+    assert "Skeleton leaf-size sweep" in markdown
+    assert "| cylinder | skeleton 20 mm (oracle views) |" in markdown
+    assert all(r["oracle_views"] and "oracle views" in r["label"] for r in report["rows"])
+    assert "oracle_views" in (out / "report.csv").read_text().splitlines()[0]
+    # Every path file comes with its error report, the row's own figures.
+    error = json.loads((out / "paths" / "cylinder_nurbs.error.json").read_text())
+    assert error["mean_mm"] == rows[("cylinder", "nurbs")]["mean_mm"]
     assert "cores" in markdown  # the machine the figures were measured on
     # The table on screen carries the paper's figures beside ours.
     assert "paper" in result.stdout and "3.01" in result.stdout
@@ -121,8 +128,8 @@ def test_unknown_method_is_one_line(tmp_path: Path) -> None:
 @pytest.mark.slow
 def test_explore_mode_is_the_default_and_scans_once_per_method(tmp_path: Path) -> None:
     out = tmp_path / "explored"
-    result = run("reproduce", "--objects", "cylinder", "--methods", "nurbs",
-                 "--width", 320, "--height", 240, "--jobs", 1, "--no-plots", "-o", out)  # fmt: skip
+    result = run("reproduce", "--objects", "cylinder", "--methods", "nurbs", "--width", 320,
+                 "--height", 240, "--scheduler", "inline", "--no-plots", "-o", out)  # fmt: skip
     assert result.exit_code == 0, result.output
     report = json.loads((out / "report.json").read_text())
     assert report["options"]["mode"] == "explore"

@@ -23,6 +23,7 @@ from scrapcut_cli.exploration.replay import (
 )
 from scrapcut_cli.geometry import look_at
 from scrapcut_cli.perception.paint import PAINT_PRESETS
+from scrapcut_cli.pipeline.explore import fit_exploration
 
 ORANGE = PAINT_PRESETS["orange"].hsv
 
@@ -63,7 +64,8 @@ def test_replay_repeats_every_decision(explored: tuple[Path, LoopResult]) -> Non
     assert np.allclose(run.steps[0].requested, CylinderScan().initial_view)
     assert run.steps[1].execution_error() == pytest.approx((0.0, 0.0), abs=1e-9)
     assert run.camera_travel_m > 0.5
-    assert run.error is not None and run.error.coverage >= 0.95
+    fitted = fit_exploration(run)  # the global fit: the pipeline's job on the planner's clouds
+    assert fitted.report.error is not None and fitted.report.error.coverage >= 0.95
     data = json.loads(json.dumps(run.to_dict()))
     assert data["matches_log"] is True and data["views"] == len(loop.frames)
     assert len(data["steps"]) == len(loop.frames)
@@ -212,7 +214,8 @@ def test_what_if_explores_a_dense_recording(survey: Path) -> None:
     assert run.mode == "what_if" and run.divergences == []
     assert run.stop_reason == "done" and run.endpoints_found == 2
     assert run.views < run.frames_available == 42
-    assert run.error is not None and run.error.coverage >= 0.9
+    error = fit_exploration(run).report.error
+    assert error is not None and error.coverage >= 0.9
     assert run.config["what_if"]["start_frame"] in range(42)
     # Every executed view is a recorded one near what was planned.
     for step in run.steps[1:]:
@@ -225,8 +228,10 @@ def test_what_if_parameters_change_the_outcome(survey: Path) -> None:
     blind = what_if(survey, config=ScrapcutConfig().override("exploration", delta_size=10**6))
     # Nothing ever counts as growth: each direction ends at its first view.
     assert blind.views < default.views
-    assert blind.error is not None and default.error is not None
-    assert blind.error.coverage < default.error.coverage
+    blind_error = fit_exploration(blind).report.error
+    default_error = fit_exploration(default).report.error
+    assert blind_error is not None and default_error is not None
+    assert blind_error.coverage < default_error.coverage
     with pytest.raises(ExplorationError, match="start frame 999"):
         what_if(survey, config=ScrapcutConfig(), start_frame=999)
 

@@ -430,3 +430,26 @@ def apply_stage_options(config: ScrapcutConfig, values: dict[str, Any]) -> Scrap
     for stage, given in by_stage.items():
         config = config.override(stage, **given)
     return config
+
+
+# --------------------------------------------------------------------------- batch engine
+
+
+def engine_options(f: F) -> F:
+    """``--workers N`` (alias ``--jobs``) and ``--scheduler ADDR``: where Dask runs the tasks."""
+    f = click.option(
+        "--scheduler",
+        default=None,
+        metavar="ADDR",
+        help="A running Dask scheduler, e.g. tcp://host:8786 (workers must see the same files), "
+        "or 'inline' to run in this process without Dask (default: a local cluster).",
+    )(f)
+    f = click.option(
+        "--workers",
+        "--jobs",
+        "workers",
+        type=bounded(1, 1024, "worker processes"),
+        default=None,
+        help="Worker processes of the local Dask cluster, one thread each (default: one per core).",
+    )(f)
+    return f

@@ -17,11 +17,13 @@ from scrapcut_cli.commands._options import (
     paint_options,
     recording_options,
 )
+from scrapcut_cli.config import FitMethod, choice_names
 
 if TYPE_CHECKING:
     from scrapcut_cli.exploration.replay import ExplorationRun
+    from scrapcut_cli.pipeline.job import JobResult
 
-METHODS = ("nurbs", "skeleton")
+METHODS = choice_names(FitMethod)
 
 
 @click.command("explore")
@@ -100,7 +102,13 @@ METHODS = ("nurbs", "skeleton")
     type=click.Path(path_type=Path),
     default=None,
     metavar="REC|CSV",
-    help="Reference curve for the coverage (default: the recording's /scrapcut/reference).",
+    help="Reference curve for the global fit's error (default: the recording's "
+    "/scrapcut/reference, if any).",
+)
+@click.option(
+    "--no-eval",
+    is_flag=True,
+    help="Do not measure the global fit against a reference (no PATH.error.json).",
 )
 @click.option(
     "-o",
@@ -108,7 +116,7 @@ METHODS = ("nurbs", "skeleton")
     type=click.Path(dir_okay=False, path_type=Path),
     default=None,
     help="Also write the path file (scrapcut.path/v1 JSON) of the global fit over the frames "
-    "the planner used: scrapcut fit's recipe.",
+    "the planner used (scrapcut fit's job), and its error report PATH.error.json/.md.",
 )
 @click.option("--json", "as_json", is_flag=True, help="Print the run (summary and steps) as JSON.")
 @config_option
@@ -128,6 +136,7 @@ def explore(
     match_angle_deg: float,
     start_frame: int | None,
     reference: Path | None,
+    no_eval: bool,
     output: Path | None,
     as_json: bool,
     config_path: Path | None,
@@ -140,9 +149,12 @@ def explore(
     compared with the logged one; a divergence exits with status 1. With --what-if the planner
     runs with the given parameters over any recording's frames (a survey is dense enough) and
     reports the views it would take, the endpoints it finds and the coverage of the final fit.
-    With -o, the global fit over the frames the planner used is written as a path file.
+    With -o, the global fit over the frames the planner used is written as a path file, with
+    its error report beside it when a reference is at hand.
     """
     from scrapcut_cli.commands._console import err, progress
+    from scrapcut_cli.pipeline.evaluate import check_reference_given
+    from scrapcut_cli.pipeline.explore import fit_exploration
 
     planner_options = {
         "--delta-size": delta_size,
@@ -159,12 +171,12 @@ def explore(
             f"{', '.join(given)} change the planner: add --what-if (a replay repeats the logged "
             "parameters)"
         )
+    if no_eval and reference is not None:
+        raise click.UsageError("--reference and --no-eval contradict each other")
+    if output is not None and output.resolve() == recording.resolve():
+        raise click.UsageError(f"{output} would overwrite the recording; choose another -o")
     config = build_config(config_path, **shared)
-    reference_points = None
-    if reference is not None:
-        from scrapcut_cli.evaluation.sources import load_reference
-
-        reference_points = load_reference(reference, config=config.recording).points
+    check_reference_given(reference)
 
     with progress("steps" if not what_if_mode else "frames") as bar:
         task = bar.add_task("what-if" if what_if_mode else "replaying", total=None, status="")
@@ -188,7 +200,6 @@ def explore(
             run = what_if(
                 recording,
                 config=config,
-                reference=reference_points,
                 start_frame=start_frame,
                 match_distance_m=match_distance_mm / 1000.0,
                 match_angle_deg=match_angle_deg,
@@ -201,27 +212,27 @@ def explore(
                 recording,
                 config=config,
                 method=method,
-                reference=reference_points,
                 progress=advance,
             )
 
-    written = None
-    if output is not None:
-        from scrapcut_cli.exploration.replay import fit_path
-        from scrapcut_cli.toolpath.pathfile import write_path_file
-
-        write_path_file(output, fit_path(run, config=config).to_path_dict())
-        written = output
+    fitted = fit_exploration(
+        run, config=config, output=output, reference=reference, evaluate=not no_eval
+    )
+    summary = fitted.summary()
     if as_json:
         data = run.to_dict()
-        data["output"] = None if written is None else str(written)
+        data["output"] = None if output is None else str(output)
+        data["fit_failure"] = fitted.failure
+        data["curve_length_mm"] = None if fitted.fit is None else 1000.0 * fitted.fit.curve.length
+        for key in ("error", "error_status", "error_report"):
+            data[key] = summary[key]
         click.echo(json.dumps(data, indent=2))
     else:
-        _render(run)
-        if written is not None:
-            err.print(f"wrote {written}")
-    if run.fit_failure:
-        err.print(f"[yellow]note:[/] the global fit failed: {run.fit_failure}")
+        _render(run, fitted)
+        if fitted.written:
+            err.print(f"wrote {', '.join(str(p) for p in fitted.written)}")
+    if fitted.failure:
+        err.print(f"[yellow]note:[/] the global fit failed: {fitted.failure}")
     if run.divergences:
         from scrapcut_cli.errors import ExplorationError
 
@@ -231,11 +242,12 @@ def explore(
         )
 
 
-def _render(run: ExplorationRun) -> None:
+def _render(run: ExplorationRun, fitted: JobResult) -> None:
     import numpy as np
     from rich.table import Table
 
     from scrapcut_cli.commands._console import out, print_table
+    from scrapcut_cli.pipeline.evaluate import error_text
 
     title = "Algorithm 1 " + ("replayed" if run.mode == "replay" else "what-if")
     steps = Table(title=f"{title}: {run.source} ({run.method})")
@@ -283,16 +295,11 @@ def _render(run: ExplorationRun) -> None:
         ("camera travel", f"{1000 * run.camera_travel_m:.0f} mm (straight lines between views)"),
         ("stitched paint", f"{len(run.paint_points)} points"),
     ]
-    if run.curve is not None:
-        rows.append(("global fit", f"{1000 * run.curve.length:.1f} mm of curve"))
-    if run.error is not None:
-        e = run.error
+    if fitted.fit is not None:
+        rows.append(("global fit", f"{1000 * fitted.fit.curve.length:.1f} mm of curve"))
+    if fitted.failure is None:
         rows.append(
-            (
-                "against the reference",
-                f"mean {1000 * e.mean_m:.2f} mm, max {1000 * e.max_m:.2f} mm, coverage "
-                f"{100 * e.coverage:.1f} %",
-            )
+            ("against the reference", error_text(fitted.report.summary(), fitted.report.status))
         )
     if run.timings:
         planner = np.median([t.planner for t in run.timings])

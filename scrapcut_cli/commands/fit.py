@@ -20,8 +20,9 @@ from scrapcut_cli.commands._options import (
     split_stage_options,
     stitch_options,
 )
+from scrapcut_cli.config import FitMethod, choice_names
 
-METHODS = ("nurbs", "skeleton")
+METHODS = choice_names(FitMethod)
 
 
 @click.command("fit")
@@ -54,6 +55,19 @@ METHODS = ("nurbs", "skeleton")
     help="Also write the NURBS as geomdl JSON (--method nurbs).",
 )
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+@click.option(
+    "--reference",
+    type=click.Path(path_type=Path),
+    default=None,
+    metavar="REC|CSV",
+    help="Reference curve to measure the path against: a CSV x,y,z in metres (e.g. probed "
+    "points) or a recording with /scrapcut/reference (default: the recording's own, if any).",
+)
+@click.option(
+    "--no-eval",
+    is_flag=True,
+    help="Do not measure the path against a reference (no PATH.error.json).",
+)
 @click.option(
     "--leaf-size",
     "leaf_size_mm",
@@ -142,6 +156,8 @@ def fit(
     write_mcap: bool,
     nurbs_json: Path | None,
     as_json: bool,
+    reference: Path | None,
+    no_eval: bool,
     leaf_size_mm: float | None,
     smoothness: float | None,
     control_points: int | None,
@@ -164,21 +180,28 @@ def fit(
     every frame, fits an open NURBS or a 3-D skeleton, and places torch set-points
     perpendicular to the observed surface at the standoff, tilted where the torch would hit
     the piece, timed by the material's cutting speed.
+
+    When a reference is at hand (the recording's /scrapcut/reference, or --reference), the
+    path is measured against it as `scrapcut eval` does, and PATH.error.json and PATH.error.md
+    are written beside the path file.
     """
     from scrapcut_cli.commands._console import err, progress
-    from scrapcut_cli.toolpath.pathfile import write_path_csv, write_path_file, write_path_mcap
-    from scrapcut_cli.toolpath.recipe import fit_recording
+    from scrapcut_cli.pipeline.evaluate import error_report_paths
+    from scrapcut_cli.pipeline.job import Job, Pipeline
 
     csv_path = output.with_suffix(".csv") if write_csv else None
     mcap_path = output.with_suffix(".mcap") if write_mcap else None
     extra = [p for p in (csv_path, mcap_path, nurbs_json) if p is not None]
-    for target in [output, *extra]:
+    reports = [] if no_eval else list(error_report_paths(output))
+    for target in [output, *extra, *reports]:
         if target.resolve() == recording.resolve():
             raise click.UsageError(f"{target} would overwrite the recording; choose another -o")
-    if any(p.resolve() == output.resolve() for p in extra):
+    if any(p.resolve() == output.resolve() for p in [*extra, *reports]):
         raise click.UsageError(f"-o {output} would be overwritten by an export; name it .json")
-    if nurbs_json is not None and method != "nurbs":
+    if nurbs_json is not None and method != FitMethod.NURBS:
         raise click.UsageError("--nurbs-json needs --method nurbs")
+    if no_eval and reference is not None:
+        raise click.UsageError("--reference and --no-eval contradict each other")
 
     stage, shared = split_stage_options(shared)
     config = apply_stage_options(build_config(config_path, **shared), stage)
@@ -199,40 +222,26 @@ def fit(
         speed_table=None if speed_table is None else str(speed_table),
     )
 
+    job = Job(
+        recording,
+        FitMethod(method),
+        config,
+        output=output,
+        reference=reference,
+        evaluate=not no_eval,
+        csv=write_csv,
+        mcap=write_mcap,
+        nurbs_json=nurbs_json,
+    )
     with progress("frames") as bar:
         task = bar.add_task("stitching", total=None, status="")
 
         def advance(done: int, total: int) -> None:
             bar.update(task, completed=done, total=total)
 
-        result = fit_recording(recording, method=method, config=config, progress=advance)
-
-    write_path_file(output, result.to_path_dict())
-    written = [output]
-    if csv_path is not None:
-        write_path_csv(result.path, csv_path)
-        written.append(csv_path)
-    if mcap_path is not None:
-        write_path_mcap(
-            mcap_path,
-            result.curve,
-            result.path,
-            frame_id=result.frame_id,
-            paint_points=result.stitch.paint_points,
-            surface_points=result.stitch.surface_points,
-            stamp_ns=result.stamp_ns,
-        )
-        written.append(mcap_path)
-    if nurbs_json is not None:
-        from scrapcut_cli._io import write_text_atomic
-        from scrapcut_cli.fitting.nurbs import nurbs_to_geomdl_json
-
-        assert result.curve.nurbs is not None  # --method nurbs
-        write_text_atomic(nurbs_json, nurbs_to_geomdl_json(result.curve.nurbs))
-        written.append(nurbs_json)
+        result = Pipeline(job, progress=advance).run()
 
     summary = result.summary()
-    summary["outputs"] = [str(p) for p in written]
     if as_json:
         click.echo(json.dumps(summary, indent=2))
     else:
@@ -249,6 +258,7 @@ def _render(summary: dict[str, Any]) -> None:
     from rich.table import Table
 
     from scrapcut_cli.commands._console import out
+    from scrapcut_cli.pipeline.evaluate import error_text
 
     table = Table(title=f"scrapcut fit — {summary['method']}", show_header=False)
     table.add_column("", style="bold")
@@ -295,6 +305,7 @@ def _render(summary: dict[str, Any]) -> None:
             f"{time_s['total']:.2f} s (read+stitch {time_s['read_stitch']:.2f}, "
             f"fit {time_s['fit']:.3f}, tool path {time_s['toolpath']:.3f})",
         ),
+        ("error vs reference", error_text(summary["error"], summary["error_status"])),
         ("written", ", ".join(summary["outputs"])),
     ]
     for key, value in rows:

@@ -14,10 +14,11 @@ from scrapcut_cli.commands._options import (
     mm_to_m,
     paint_options,
 )
+from scrapcut_cli.config import FitMethod, ScanMode, choice_names
 
-MODES = ("sweep", "survey", "explore")
+MODES = choice_names(ScanMode)
 NOISES = ("ideal", "d435i", "yard")
-METHODS = ("nurbs", "skeleton")
+METHODS = choice_names(FitMethod)
 
 
 @click.command("record")

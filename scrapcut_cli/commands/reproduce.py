@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import os
 import shlex
 import sys
 from pathlib import Path
@@ -11,17 +10,15 @@ from pathlib import Path
 import click
 
 from scrapcut_cli.commands._console import err, out
-from scrapcut_cli.commands._options import bounded, build_config, config_option, config_type
+from scrapcut_cli.commands._options import (
+    build_config,
+    config_option,
+    config_type,
+    engine_options,
+)
+from scrapcut_cli.config import ScanMode
 
-#: With these defaults and the simulator's (640×480, explore) the paper's five objects × two
-#: methods take well under the issue's 3 minutes with two jobs on a 2-core machine (about 15 s
-#: when measured: benchmarks/bench_reproduce.py).
-DEFAULT_JOBS = 2
 DEFAULT_LEAF_SWEEP = "2,3,5,10,15,20"
-
-
-#: What the progress bar counts in each stage of the library's progress callback.
-_STAGE_TEXT = {"record": "views recorded", "stitch": "frames stitched", "leaf sweep": "leaf sizes"}
 
 
 def _names(values: tuple[str, ...]) -> list[str]:
@@ -53,20 +50,22 @@ def _names(values: tuple[str, ...]) -> list[str]:
 )
 @click.option(
     "--mode",
-    type=click.Choice(["sweep", "explore"]),
+    type=click.Choice([ScanMode.SWEEP.value, ScanMode.EXPLORE.value]),
     default=None,
-    help="Scan by exploration (Algorithm 1, the paper's method) or by a pre-planned sweep "
-    "(default: explore; with --config, the file's sim.mode).",
+    help="Scan by exploration (Algorithm 1, the paper's method) or by a pre-planned sweep along "
+    "the true line (rows labelled 'oracle views') (default: explore; with --config, the file's "
+    "sim.mode).",
 )
 @click.option(
-    "--seed", type=config_type("sim.seed"), default=None, help="Simulator seed (default 0)."
-)
-@click.option(
-    "--jobs",
-    type=bounded(1, 1024, "worker processes"),
+    "--seeds",
+    "--seed",
+    "seeds",
     default=None,
-    help=f"Objects run in parallel processes (default: {DEFAULT_JOBS}, at most the cores).",
+    metavar="A-B|LIST",
+    help="Simulator seeds, e.g. 0-19 or 0,3,7: Table I becomes the mean ± 95 % interval over "
+    "them (default 0).",
 )
+@engine_options
 @click.option(
     "--width", type=config_type("sim.width"), default=None, help="Image width [px] (default 640)."
 )
@@ -99,6 +98,21 @@ def _names(values: tuple[str, ...]) -> list[str]:
 )
 @click.option("--no-plots", is_flag=True, help="Skip the PNG figures.")
 @click.option(
+    "--readme",
+    type=click.Path(dir_okay=False, exists=True, path_type=Path),
+    default=None,
+    help="Also rewrite the marked section of this Markdown file (the README's Table I) with the "
+    "run's description and table.",
+)
+@click.option(
+    "--readme-section",
+    default="table1",
+    show_default=True,
+    metavar="NAME",
+    help="Which marked section --readme rewrites: the lines between "
+    "'<!-- scrapcut:NAME begin ... -->' and '<!-- scrapcut:NAME end -->'.",
+)
+@click.option(
     "-o",
     "--output",
     "out_dir",
@@ -112,73 +126,105 @@ def reproduce(
     methods: tuple[str, ...],
     noise: str | None,
     mode: str | None,
-    seed: int | None,
-    jobs: int | None,
+    seeds: str | None,
+    workers: int | None,
+    scheduler: str | None,
     width: int | None,
     height: int | None,
     leaf_size_mm: float | None,
     retry_leaf_mm: float,
     leaf_sweep_mm: str,
     no_plots: bool,
+    readme: Path | None,
+    readme_section: str,
     out_dir: Path,
     config_path: Path | None,
 ) -> None:
     """Simulate, fit and evaluate the paper's objects; print Table I beside the paper's.
 
-    Writes DIR/ with the recordings, path files, report.md, report.json, report.csv, plots/
-    and the configuration used (config.toml works as --config).
+    Writes DIR/ with the recordings, path files (each with its error report), report.md,
+    report.json, report.csv, plots/ and the configuration used (config.toml works as --config).
+    The scans run on Dask: a local cluster (one worker per core) unless --scheduler names one.
     """
     from scrapcut_cli.commands._console import print_table, progress
-    from scrapcut_cli.evaluation.report import load_paper_table, rich_table
-    from scrapcut_cli.evaluation.reproduce import check_out_dir, resolve_methods, resolve_objects
-    from scrapcut_cli.evaluation.reproduce import reproduce as run_reproduce
+    from scrapcut_cli.evaluation.report import (
+        aggregate_rows,
+        interval_rich_table,
+        load_paper_table,
+        replace_marked_section,
+        rich_table,
+    )
+    from scrapcut_cli.pipeline.engine import Engine
+    from scrapcut_cli.pipeline.reproduce import (
+        check_out_dir,
+        parse_seeds,
+        resolve_methods,
+        resolve_objects,
+        seeds_text,
+    )
+    from scrapcut_cli.pipeline.reproduce import reproduce as run_reproduce
 
     config = build_config(config_path)
     if mode is None and config_path is None:
-        mode = "explore"
-    config = config.override("sim", noise=noise, mode=mode, seed=seed, width=width, height=height)
+        mode = ScanMode.EXPLORE
+    config = config.override("sim", noise=noise, mode=mode, width=width, height=height)
     if leaf_size_mm is not None:
         config = config.override("skeleton", leaf_size_m=leaf_size_mm / 1000.0)
+    seed_list = parse_seeds(seeds) if seeds is not None else (config.sim.seed,)
     names = resolve_objects(_names(objects))
     method_names = resolve_methods(_names(methods))
-    n_jobs = jobs if jobs is not None else max(1, min(DEFAULT_JOBS, os.cpu_count() or 1))
     sweep = _leaf_sizes_m(leaf_sweep_mm)
     check_out_dir(out_dir)  # before the banner: a refusal is the only line printed
+    if readme is not None:  # the markers must be there before minutes of work
+        replace_marked_section(readme.read_text(encoding="utf-8"), readme_section, "")
 
-    err.print(
-        f"reproducing Table I: {len(names)} object(s) × {len(method_names)} method(s), "
-        f"{config.sim.mode} mode, {config.sim.noise} noise, "
-        f"{config.sim.width}×{config.sim.height} px, {n_jobs} job(s) → {out_dir}/"
-    )
-    with progress("") as bar:
-        tasks = {name: bar.add_task(name, total=None, status="waiting") for name in names}
-
-        def update(obj: str, stage: str, done: int, total: int) -> None:
-            task = tasks[obj]
-            if stage == "done":
-                bar.update(task, total=1, completed=1, status="done")
-            else:
-                status = _STAGE_TEXT.get(stage, stage)
-                bar.update(task, total=total or None, completed=done, status=status)
-
-        result = run_reproduce(
-            out_dir,
-            objects=names,
-            methods=method_names,
-            config=config,
-            jobs=n_jobs,
-            retry_leaf_size_m=retry_leaf_mm / 1000.0,
-            leaf_sweep_m=sweep,
-            plots=not no_plots,
-            progress=update,
-            command=" ".join(["scrapcut", *(shlex.quote(a) for a in sys.argv[1:])])
-            if sys.argv and Path(sys.argv[0]).name == "scrapcut"
-            else "scrapcut reproduce",
+    with Engine(scheduler=scheduler, workers=workers) as engine:
+        err.print(
+            f"reproducing Table I: {len(names)} object(s) × {len(method_names)} method(s), "
+            f"{config.sim.mode} mode, {config.sim.noise} noise, "
+            f"{config.sim.width}×{config.sim.height} px, {seeds_text(seed_list)}, "
+            f"{engine.describe()} → {out_dir}/"
         )
-    print_table(rich_table(result.rows, paper=load_paper_table(), title="Table I (ours vs paper)"))
+        with progress("scans") as bar:
+            task = bar.add_task("reproduce", total=None, status="starting")
+
+            def update(done: int, total: int, last: str) -> None:
+                bar.update(task, total=total, completed=done, status=f"{last} done")
+
+            result = run_reproduce(
+                out_dir,
+                objects=names,
+                methods=method_names,
+                config=config,
+                seeds=seed_list,
+                engine=engine,
+                retry_leaf_size_m=retry_leaf_mm / 1000.0,
+                leaf_sweep_m=sweep,
+                plots=not no_plots,
+                progress=update,
+                command=" ".join(["scrapcut", *(shlex.quote(a) for a in sys.argv[1:])])
+                if sys.argv and Path(sys.argv[0]).name == "scrapcut"
+                else "scrapcut reproduce",
+            )
+    paper = load_paper_table()
+    if len(result.seeds) > 1:
+        table = interval_rich_table(
+            aggregate_rows(result.rows), paper=paper, title="Table I (ours: mean ± 95 % interval)"
+        )
+    else:
+        table = rich_table(result.rows, paper=paper, title="Table I (ours vs paper)")
+    print_table(table)
     failed = [r for r in result.rows if r.failure]
     if failed:
         err.print(f"[yellow]{len(failed)} row(s) failed; see the Note column[/yellow]")
+    if readme is not None:
+        from scrapcut_cli._io import write_text_atomic
+
+        text = readme.read_text(encoding="utf-8")
+        write_text_atomic(
+            readme, replace_marked_section(text, readme_section, result.table_markdown)
+        )
+        err.print(f"rewrote the '{readme_section}' section of {readme}")
     out.print(f"wrote {out_dir}/ in {result.wall_time_s:.1f} s (report.md, report.json, plots/)")
 
 

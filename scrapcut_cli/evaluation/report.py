@@ -4,6 +4,10 @@ Renderers return text (markdown, CSV, JSON) or a rich renderable (the screen tab
 them prints. Figures are millimetres in every rendering; ``coverage`` stays a share (0–1) in
 the machine-readable ones and a percentage on screen and in markdown.
 
+A row measured on a simulator *sweep* (views that follow the true reference line: an oracle no
+real cell has) is labelled "oracle views" in every rendering (its label, ``oracle_views`` in JSON
+and CSV), so it is never mistaken for a result of the explored scans.
+
 Against the paper a figure of ours is *worse* when, rounded to the paper's two decimals, it is
 larger than the paper's (every Table I column is an error, so larger is worse, the minimum
 included). Failed fits are worse on every figure.
@@ -39,6 +43,8 @@ PAPER_NOTES = {("basket", "skeleton"): "20 mm leaf (5 mm broke)"}
 
 #: Marks a figure worse than the paper's.
 WORSE_MARK = "▲"
+#: Label of rows whose scan followed the true line (simulator sweep mode).
+ORACLE_LABEL = "oracle views"
 
 
 @dataclass(frozen=True)
@@ -101,7 +107,9 @@ class ReportRow:
     ``params`` are the method's parameters from the path file (``leaf_size_m`` for the
     skeleton); ``note`` says anything the figures alone do not (a retry at a larger leaf);
     ``failure`` is the one-line reason when the path could not be made; ``curve_points`` and
-    ``reference_points`` ((N, 3) metres, base frame) are kept for the plots, not rendered.
+    ``reference_points`` ((N, 3) metres, base frame) are kept for the plots, not rendered;
+    ``oracle_views`` marks a scan whose views followed the true line (a simulator sweep);
+    ``extras`` holds further per-row figures (name → number or text), rendered in JSON and CSV.
     """
 
     object: str
@@ -113,6 +121,8 @@ class ReportRow:
     source: str = ""
     curve_points: NDArray[np.float64] | None = None
     reference_points: NDArray[np.float64] | None = None
+    oracle_views: bool = False
+    extras: dict[str, Any] = field(default_factory=dict)
 
     @property
     def leaf_size_m(self) -> float | None:
@@ -121,9 +131,11 @@ class ReportRow:
 
     @property
     def label(self) -> str:
-        """Method name, with the leaf size when there is one (``skeleton 5 mm``)."""
+        """Method name, with the leaf size when there is one (``skeleton 5 mm``), and
+        ``(oracle views)`` for a sweep's row."""
         leaf = self.leaf_size_m
-        return self.method if leaf is None else f"{self.method} {_fmt_leaf(leaf)} mm"
+        label = self.method if leaf is None else f"{self.method} {_fmt_leaf(leaf)} mm"
+        return f"{label} ({ORACLE_LABEL})" if self.oracle_views else label
 
     def figures_mm(self) -> dict[str, Any] | None:
         """The metric in millimetres (``PathError.summary_mm``), or None for a failed row."""
@@ -170,6 +182,9 @@ def rows_to_records(
         record["failure"] = row.failure
         record["path"] = row.source
         record["params"] = row.params
+        record["label"] = row.label
+        record["oracle_views"] = row.oracle_views
+        record.update(row.extras)
         if paper is not None:
             figures_paper = paper.get((row.object, row.method))
             record["paper"] = None if figures_paper is None else figures_paper.as_dict()
@@ -200,19 +215,23 @@ CSV_FIELDS = (
     "note",
     "failure",
     "path",
+    "oracle_views",
 )
 
 
 def render_csv(rows: Sequence[ReportRow], *, paper: PaperTable | None = None) -> str:
     """CSV, one line per row; with ``paper``, ``paper_mean_mm``... and ``worse_than_paper``."""
     columns = list(CSV_FIELDS)
+    extras = list(dict.fromkeys(key for row in sort_rows(rows) for key in row.extras))
+    columns += [key for key in extras if key not in columns]
     if paper is not None:
         columns += [f"paper_{f}" for f in TABLE1_FIELDS] + ["worse_than_paper"]
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=columns, lineterminator="\n")
     writer.writeheader()
     for record in rows_to_records(rows, paper=paper):
-        line = {c: record.get(c) for c in CSV_FIELDS}
+        line = {c: record.get(c) for c in columns if not c.startswith("paper_")}
+        line.pop("worse_than_paper", None)
         if paper is not None:
             figures_paper = record["paper"] or {}
             for f in TABLE1_FIELDS:
@@ -404,3 +423,244 @@ def _rich_escape(text: str) -> str:
     from rich.markup import escape
 
     return escape(text)
+
+
+# --------------------------------------------------------------------------- over seeds
+
+#: The figures averaged over simulator seeds, with a 95 % interval of their mean.
+INTERVAL_FIELDS = (*TABLE1_FIELDS, "coverage", "reverse_max_mm", "length_ratio")
+#: Confidence of the interval around a mean over seeds.
+CONFIDENCE = 0.95
+
+
+@dataclass(frozen=True)
+class SeedAggregate:
+    """One object × method over several runs (simulator seeds).
+
+    ``mean[f]`` is the mean over the successful runs of figure ``f`` (:data:`INTERVAL_FIELDS`,
+    millimetres, coverage a share); ``half_width[f]`` the half width of its 95 % Student-t
+    interval (None with fewer than two runs); ``runs`` rows in the group, ``failed`` of them
+    without figures; ``labels`` the distinct row labels (a skeleton retried at 20 mm on some
+    seeds has two).
+    """
+
+    object: str
+    method: str
+    runs: int
+    failed: int
+    mean: dict[str, float]
+    half_width: dict[str, float | None]
+    labels: tuple[str, ...]
+    notes: tuple[str, ...]
+    oracle_views: bool = False
+
+    @property
+    def label(self) -> str:
+        label = self.labels[0] if len(self.labels) == 1 else self.method
+        if self.oracle_views and ORACLE_LABEL not in label:
+            label = f"{label} ({ORACLE_LABEL})"
+        return label
+
+    def interval_text(self, field_name: str, *, percent: bool = False) -> str:
+        """``0.99 ± 0.05`` (or ``99.5 ± 0.4%``); ``—`` when every run failed."""
+        if field_name not in self.mean:
+            return "—"
+        scale = 100.0 if percent else 1.0
+        unit = "%" if percent else ""
+        digits = 1 if percent else (3 if field_name == "length_ratio" else 2)
+        value = f"{scale * self.mean[field_name]:.{digits}f}"
+        hw = self.half_width.get(field_name)
+        return value + unit if hw is None else f"{value} ± {scale * hw:.{digits}f}{unit}"
+
+
+def aggregate_rows(rows: Sequence[ReportRow]) -> list[SeedAggregate]:
+    """Group rows by object, method and oracle label; mean and 95 % interval of each figure."""
+    from scipy import stats
+
+    groups: dict[tuple[str, str, bool], list[ReportRow]] = {}
+    for row in sort_rows(rows):
+        groups.setdefault((row.object, row.method, row.oracle_views), []).append(row)
+    out = []
+    for (obj, method, oracle), members in groups.items():
+        figures = [f for f in (r.figures_mm() for r in members) if f is not None]
+        mean: dict[str, float] = {}
+        half: dict[str, float | None] = {}
+        for name in INTERVAL_FIELDS if figures else ():
+            values = np.array([f[name] for f in figures], dtype=np.float64)
+            mean[name] = float(values.mean())
+            n = len(values)
+            if n >= 2:
+                t = float(stats.t.ppf(0.5 + CONFIDENCE / 2.0, n - 1))
+                half[name] = t * float(values.std(ddof=1)) / math.sqrt(n)
+            else:
+                half[name] = None
+        labels = tuple(dict.fromkeys(_plain_label(r) for r in members))
+        notes = tuple(dict.fromkeys(n for r in members for n in (r.note, r.failure) if n))
+        out.append(
+            SeedAggregate(
+                object=obj,
+                method=method,
+                runs=len(members),
+                failed=len(members) - len(figures),
+                mean=mean,
+                half_width=half,
+                labels=labels,
+                notes=notes,
+                oracle_views=oracle,
+            )
+        )
+    return out
+
+
+def _plain_label(row: ReportRow) -> str:
+    leaf = row.leaf_size_m
+    return row.method if leaf is None else f"{row.method} {_fmt_leaf(leaf)} mm"
+
+
+def aggregate_records(
+    aggregates: Sequence[SeedAggregate], *, paper: PaperTable | None = None
+) -> list[dict[str, Any]]:
+    """JSON-ready: per object × method, ``<figure>`` (mean over runs) and
+    ``<figure>_ci95`` (half width of the interval, None with one run)."""
+    records = []
+    for agg in aggregates:
+        record: dict[str, Any] = {
+            "object": agg.object,
+            "method": agg.method,
+            "label": agg.label,
+            "runs": agg.runs,
+            "failed": agg.failed,
+            "oracle_views": agg.oracle_views,
+        }
+        for name in INTERVAL_FIELDS:
+            record[name] = agg.mean.get(name)
+            record[f"{name}_ci95"] = agg.half_width.get(name)
+        record["notes"] = list(agg.notes)
+        if paper is not None:
+            figures_paper = paper.get((agg.object, agg.method))
+            record["paper"] = None if figures_paper is None else figures_paper.as_dict()
+            record["worse_than_paper"] = (
+                None if figures_paper is None else _aggregate_worse(agg, figures_paper)
+            )
+        records.append(record)
+    return records
+
+
+def _aggregate_worse(agg: SeedAggregate, paper: PaperFigures) -> list[str]:
+    """Table I figures whose mean over runs is worse than the paper's single run."""
+    if not agg.mean:
+        return list(TABLE1_FIELDS)
+    return [f for f in TABLE1_FIELDS if round(agg.mean[f], 2) > getattr(paper, f)]
+
+
+def render_interval_markdown(
+    aggregates: Sequence[SeedAggregate], *, paper: PaperTable | None = None
+) -> str:
+    """Table I as mean ± 95 % interval over runs, the paper's single run after each figure."""
+    header = ["Object", "Method", "Runs"]
+    for f in TABLE1_FIELDS:
+        header.append(f"{_TITLES[f]} [mm]")
+        if paper is not None:
+            header.append(f"{_TITLES[f]} paper")
+    header += ["Coverage", "Rev. max [mm]", "Length ratio", "Note"]
+    lines = ["| " + " | ".join(header) + " |"]
+    lines.append("|" + "|".join(["---", "---"] + ["---:"] * (len(header) - 3) + ["---"]) + "|")
+    worse_count = 0
+    for agg in aggregates:
+        figures_paper = None if paper is None else paper.get((agg.object, agg.method))
+        worse = set() if figures_paper is None else set(_aggregate_worse(agg, figures_paper))
+        worse_count += len(worse)
+        runs = f"{agg.runs - agg.failed}/{agg.runs}"
+        cells = [agg.object, agg.label, runs]
+        for f in TABLE1_FIELDS:
+            text = agg.interval_text(f)
+            cells.append(f"{text} {WORSE_MARK}" if f in worse else text)
+            if paper is not None:
+                cells.append("—" if figures_paper is None else f"{getattr(figures_paper, f):.2f}")
+        cells += [
+            agg.interval_text("coverage", percent=True),
+            agg.interval_text("reverse_max_mm"),
+            agg.interval_text("length_ratio"),
+            "; ".join(
+                [
+                    *agg.notes[:2],
+                    *((figures_paper.note,) if figures_paper and figures_paper.note else ()),
+                ]
+            ),
+        ]
+        lines.append("| " + " | ".join(_md_escape(c) for c in cells) + " |")
+    lines.append("")
+    lines.append(
+        "Each figure is the mean over the runs (simulator seeds) ± the half width of its 95 % "
+        "Student-t interval; runs = successful/all. Distances in millimetres from each reference "
+        "sample to the fitted curve; coverage = share of samples within the threshold."
+    )
+    if paper is not None:
+        lines.append(
+            f"{WORSE_MARK} = mean over runs larger (worse) than the paper's single run "
+            f"({worse_count} figure(s))."
+        )
+    return "\n".join(lines) + "\n"
+
+
+def interval_rich_table(
+    aggregates: Sequence[SeedAggregate],
+    *,
+    paper: PaperTable | None = None,
+    title: str | None = None,
+) -> Table:
+    """The screen version of :func:`render_interval_markdown` (paper's figures in a dim row)."""
+    from rich.table import Table
+
+    table = Table(title=title)
+    for name in ("Object", "Method", "Runs", *(f"{_TITLES[f]}\n[mm]" for f in TABLE1_FIELDS)):
+        table.add_column(
+            _rich_escape(name), justify="left" if name in ("Object", "Method") else "right"
+        )
+    table.add_column("Coverage", justify="right")
+    table.add_column("Note", max_width=40, overflow="fold")
+    for agg in aggregates:
+        figures_paper = None if paper is None else paper.get((agg.object, agg.method))
+        worse = set() if figures_paper is None else set(_aggregate_worse(agg, figures_paper))
+        cells = [agg.object, agg.label, f"{agg.runs - agg.failed}/{agg.runs}"]
+        for f in TABLE1_FIELDS:
+            text = _rich_escape(agg.interval_text(f))
+            cells.append(f"[red]{text} {WORSE_MARK}[/red]" if f in worse else text)
+        cells += [
+            agg.interval_text("coverage", percent=True),
+            _rich_escape("; ".join(agg.notes[:1])),
+        ]
+        table.add_row(*cells)
+        if figures_paper is not None:
+            table.add_row(
+                "", "paper", "1",
+                *(f"{getattr(figures_paper, f):.2f}" for f in TABLE1_FIELDS),
+                "", _rich_escape(figures_paper.note), style="dim",
+            )  # fmt: skip
+    return table
+
+
+# --------------------------------------------------------------------------- marked sections
+
+#: A generated section of a Markdown file (the README's tables) lies between these two lines.
+SECTION_BEGIN = "<!-- scrapcut:{name} begin (generated: do not edit by hand) -->"
+SECTION_END = "<!-- scrapcut:{name} end -->"
+
+
+def replace_marked_section(text: str, name: str, body: str) -> str:
+    """``text`` with the lines between the ``name`` section's markers replaced by ``body``.
+
+    Raises EvaluationError when the markers are missing, repeated or out of order (the file is
+    then left for a human to fix, not guessed at).
+    """
+    begin, end = SECTION_BEGIN.format(name=name), SECTION_END.format(name=name)
+    lines = text.splitlines(keepends=True)
+    starts = [i for i, line in enumerate(lines) if line.strip() == begin]
+    ends = [i for i, line in enumerate(lines) if line.strip() == end]
+    if len(starts) != 1 or len(ends) != 1 or ends[0] < starts[0]:
+        raise EvaluationError(
+            f"expected one '{begin}' line followed by one '{end}' line; found {len(starts)} and "
+            f"{len(ends)}"
+        )
+    body = body if body.endswith("\n") else body + "\n"
+    return "".join([*lines[: starts[0] + 1], body, *lines[ends[0] :]])

@@ -16,10 +16,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from scrapcut_cli.config import EvaluationConfig, RecordingConfig
+from scrapcut_cli.config import EvaluationConfig, RecordingConfig, ScanMode
 from scrapcut_cli.errors import EvaluationError, ScrapcutError, ToolpathError
 from scrapcut_cli.evaluation.metrics import path_error
 from scrapcut_cli.evaluation.report import ReportRow
+from scrapcut_cli.fitting.curve import Curve
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,13 +43,19 @@ class PathFile:
 class Reference:
     """A painted reference curve: ``points`` (M, 3) float64, metres, base frame, ordered.
 
-    ``object`` is the simulated object's name when the recording says it; ``origin`` the file.
+    ``object`` is the simulated object's name when the recording says it; ``origin`` the file;
+    ``metadata`` the recording's simulator settings (``object``, ``mode``, ``seed``...).
     """
 
     points: NDArray[np.float64]
     origin: Path
     object: str | None = None
     metadata: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def oracle_views(self) -> bool:
+        """True for a simulator sweep: its views followed this very line (an oracle)."""
+        return str(self.metadata.get("mode", "")) == ScanMode.SWEEP
 
 
 def load_path_file(path: str | Path) -> PathFile:
@@ -63,6 +70,25 @@ def load_path_file(path: str | Path) -> PathFile:
         curve, _, meta = read_path_file(path)
     except ToolpathError as exc:
         raise EvaluationError(str(exc)) from None
+    return _path_file(path, curve, meta)
+
+
+def path_file_from_dict(data: dict[str, Any], path: str | Path) -> PathFile:
+    """A path file's dictionary (before or after it is written to ``path``) as :class:`PathFile`:
+    what :func:`load_path_file` returns for the written file, number for number (the path file
+    keeps every float's shortest round-trip repr), so a report computed before writing equals
+    ``scrapcut eval`` on the file."""
+    from scrapcut_cli.toolpath.pathfile import path_from_dict
+
+    path = Path(path)
+    try:
+        curve, _, meta = path_from_dict(data)
+    except ToolpathError as exc:
+        raise EvaluationError(f"{path}: {exc}") from None
+    return _path_file(path, curve, meta)
+
+
+def _path_file(path: Path, curve: Curve, meta: dict[str, Any]) -> PathFile:
     if len(curve.points) < 2:
         raise EvaluationError(f"{path}: curve.points must hold at least two [x, y, z] points")
     method = meta.get("method") or {}
@@ -112,6 +138,19 @@ def load_reference(path: str | Path, *, config: RecordingConfig | None = None) -
     path = Path(path)
     if path.suffix.lower() == ".csv":
         return Reference(points=read_reference_csv(path), origin=path)
+    reference = recording_reference(path, config=config)
+    if reference is None:
+        raise EvaluationError(
+            f"{path} has no /scrapcut/reference; pass --reference with a recording or CSV x,y,z"
+        )
+    return reference
+
+
+def recording_reference(
+    path: str | Path, *, config: RecordingConfig | None = None
+) -> Reference | None:
+    """A recording's own /scrapcut/reference, or None when it has none (a real scan)."""
+    path = Path(path)
     if not path.exists():
         raise EvaluationError(f"reference recording not found: {path}")
     from scrapcut_cli.recording.reader import open_recording
@@ -120,9 +159,7 @@ def load_reference(path: str | Path, *, config: RecordingConfig | None = None) -
         points = rec.reference()
         metadata = dict(rec.metadata.get("scrapcut", {}))
     if points is None or len(points) < 2:
-        raise EvaluationError(
-            f"{path} has no /scrapcut/reference; pass --reference with a recording or CSV x,y,z"
-        )
+        return None
     name = metadata.get("object")
     return Reference(
         points=np.asarray(points, dtype=np.float64),
@@ -205,4 +242,5 @@ def evaluate_path_file(
         source=str(path_file.path),
         curve_points=path_file.curve_points,
         reference_points=reference.points,
+        oracle_views=reference.oracle_views,
     )

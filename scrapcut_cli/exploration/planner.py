@@ -62,7 +62,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from scrapcut_cli import __version__
-from scrapcut_cli.config import ScrapcutConfig, SkeletonConfig
+from scrapcut_cli.config import FitMethod, ScrapcutConfig, SkeletonConfig, choice_names
 from scrapcut_cli.errors import ExplorationError, FittingError, PerceptionError
 from scrapcut_cli.exploration.decision import Decision, Reachability, ViewPlanner
 from scrapcut_cli.exploration.evidence import DepthView, EndEvidence, depth_view, end_evidence
@@ -98,7 +98,7 @@ if TYPE_CHECKING:
 
 FloatArray = NDArray[np.float64]
 
-METHODS = ("nurbs", "skeleton")
+METHODS = choice_names(FitMethod)
 #: Log schema of /scrapcut/exploration entries written from :attr:`Decision.info`.
 LOG_SCHEMA = "scrapcut.exploration/v1"
 #: Keep the line of sight this far short of the target: the surface it lies on is occupied.

@@ -19,10 +19,10 @@ Two recipes, both returning an :class:`ExplorationRun`:
     the reachability answer). Views used, endpoints found and, with a reference, the coverage
     of the global fit tell whether the parameters would have worked, without a robot.
 
-Both end with the global fit (``fitting.fit_curve`` on the stitched paint, the ``scrapcut fit``
-curve) measured against the reference when there is one (``evaluation.metrics.path_error``);
-:func:`fit_path` runs ``scrapcut fit``'s whole recipe (curve and cutting path) on the planner's
-stitched clouds for a path file. Nothing here prints; ``scrapcut explore`` renders the result.
+Both keep the planner's stitched clouds (:attr:`ExplorationRun.stitch`); the global fit, its
+cutting path and its error against the reference are the pipeline's
+(:func:`scrapcut_cli.pipeline.explore.fit_exploration`, the same job as ``scrapcut fit``), so no
+reference is read here. Nothing here prints; ``scrapcut explore`` renders the result.
 """
 
 from __future__ import annotations
@@ -31,15 +31,14 @@ import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from scrapcut_cli import __version__
 from scrapcut_cli.config import ScrapcutConfig, config_from_dict
-from scrapcut_cli.errors import ConfigError, ExplorationError, FittingError, ScrapcutError
-from scrapcut_cli.evaluation.metrics import PathError, path_error
+from scrapcut_cli.errors import ConfigError, ExplorationError
 from scrapcut_cli.exploration.planner import (
     LOG_SCHEMA,
     ExplorationPlanner,
@@ -49,14 +48,10 @@ from scrapcut_cli.exploration.planner import (
     perceive,
     pose_from_dict,
 )
-from scrapcut_cli.fitting.curve import Curve
 from scrapcut_cli.geometry import rotation_angle
 from scrapcut_cli.perception.paint import HsvRange
 from scrapcut_cli.perception.stitch import StitchResult
 from scrapcut_cli.recording.frame import Frame
-
-if TYPE_CHECKING:
-    from scrapcut_cli.toolpath.recipe import FitResult
 
 FloatArray = NDArray[np.float64]
 
@@ -170,10 +165,6 @@ class ExplorationRun:
         Every difference from the log (replay; empty when the replay matches).
     paint_points : (N, 3) float64
         The stitched paint, metres, base frame.
-    curve : Curve or None
-        Global fit of the stitched paint (None if it failed: ``fit_failure``).
-    error : PathError or None
-        The curve against the reference, when there is one.
     config : dict
         The planner's parameters (``planner_config_dict``) and the what-if's matching options.
     timings : list of StepTiming
@@ -181,8 +172,8 @@ class ExplorationRun:
     frames_available : int
         Frames in the recording the run could use (what-if: after dropping repeated poses).
     stitch : StitchResult
-        The planner's stitched paint and surface with its perception counts (for the path
-        file: :func:`fit_path`).
+        The planner's stitched paint and surface with its perception counts (the global fit's
+        input: :func:`scrapcut_cli.pipeline.explore.fit_exploration`).
     settings : ScrapcutConfig
         The configuration the planner ran with.
     """
@@ -195,9 +186,6 @@ class ExplorationRun:
     ends: list[dict[str, Any]]
     divergences: list[str]
     paint_points: FloatArray
-    curve: Curve | None
-    error: PathError | None
-    fit_failure: str | None
     config: dict[str, Any]
     timings: list[StepTiming] = field(default_factory=list)
     frames_available: int = 0
@@ -227,8 +215,8 @@ class ExplorationRun:
         return not self.divergences
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary and steps (travel, curve length and errors in mm, as in reports;
-        the ``ends`` tips and the poses in metres, as in the log)."""
+        """JSON-ready summary and steps (travel in mm, as in reports; the ``ends`` tips and the
+        poses in metres, as in the log)."""
         timings = np.array([[t.planner, t.total] for t in self.timings]) if self.timings else None
         return {
             "mode": self.mode,
@@ -243,9 +231,6 @@ class ExplorationRun:
             "paint_points": len(self.paint_points),
             "matches_log": self.matches if self.mode == "replay" else None,
             "divergences": list(self.divergences),
-            "fit_failure": self.fit_failure,
-            "curve_length_mm": None if self.curve is None else 1000.0 * self.curve.length,
-            "error": None if self.error is None else self.error.summary_mm(),
             "decision_ms_median": None
             if timings is None
             else {
@@ -354,7 +339,6 @@ def replay_exploration(
     *,
     config: ScrapcutConfig | None = None,
     method: str | None = None,
-    reference: ArrayLike | None = None,
     progress: ProgressFn | None = None,
 ) -> ExplorationRun:
     """Recompute every decision of an exploration recording and compare it with the log.
@@ -368,8 +352,6 @@ def replay_exploration(
         from the log, so the replay repeats the run.
     method : str, optional
         Must match the logged method (a different one cannot be verified: use :func:`what_if`).
-    reference : (M, 3) array, optional
-        Reference curve; default the recording's /scrapcut/reference if present.
     progress : callable, optional
         ``progress(steps_done, steps_total)``.
 
@@ -462,15 +444,12 @@ def replay_exploration(
             divergences.append(
                 f"the run was recorded by scrapcut {recorded_by}, this is scrapcut {__version__}"
             )
-        if reference is None:
-            reference = rec.reference()
     return _finish(
         "replay",
         path,
         planner,
         steps,
         divergences,
-        reference=reference,
         config=planner_config,
         frames_available=len(log),
         stop_reason=stopped_by,
@@ -555,7 +534,6 @@ def what_if(
     recording: str | os.PathLike[str],
     *,
     config: ScrapcutConfig,
-    reference: ArrayLike | None = None,
     start_frame: int | None = None,
     match_distance_m: float = 0.10,
     match_angle_deg: float = 30.0,
@@ -569,8 +547,6 @@ def what_if(
         Any recording with frames; a dense one (``survey``) answers most views.
     config : ScrapcutConfig
         The planner's parameters to try, perception, stitching and fitting.
-    reference : (M, 3) array, optional
-        Reference curve; default the recording's /scrapcut/reference if present.
     start_frame : int, optional
         Index of the frame to start from (the worker's initial segment); default the frame
         showing the most paint.
@@ -602,8 +578,6 @@ def what_if(
                 last = frame.T_base_cam
             if progress is not None:
                 progress(done, total)
-        if reference is None:
-            reference = rec.reference()
     if not library:
         raise ExplorationError(f"{path} has no usable frames to explore")
     paint = np.array([len(o.clouds.paint_base) for o in library])
@@ -652,7 +626,6 @@ def what_if(
         planner,
         steps,
         [],
-        reference=reference,
         config=planner.config,
         frames_available=len(library),
         extra=options,
@@ -694,15 +667,13 @@ def _finish(
     steps: list[ReplayStep],
     divergences: list[str],
     *,
-    reference: ArrayLike | None,
     config: ScrapcutConfig,
     frames_available: int,
     extra: dict[str, Any] | None = None,
     stop_reason: str | None = None,
 ) -> ExplorationRun:
-    """Global fit of the stitched paint and its error against the reference."""
+    """The run, with the planner's stitched clouds for the global fit."""
     from scrapcut_cli.exploration.planner import planner_config_dict
-    from scrapcut_cli.fitting import fit_curve
 
     st = planner.stitcher
     paint = st.paint_points
@@ -716,18 +687,6 @@ def _finish(
         hsv=planner.hsv,
         base_frame=planner.base_frame,
     )
-    curve: Curve | None = None
-    error: PathError | None = None
-    failure: str | None = None
-    try:
-        curve = fit_curve(paint, planner.method, config)
-    except FittingError as exc:
-        failure = str(exc)
-    if curve is not None and reference is not None:
-        try:
-            error = path_error(curve.points, reference, config=config.evaluation)
-        except ScrapcutError as exc:
-            failure = str(exc)
     settings = planner_config_dict(config)
     if extra:
         settings["what_if"] = extra
@@ -740,58 +699,12 @@ def _finish(
         ends=[dict(e) for e in planner.ends],
         divergences=divergences,
         paint_points=paint,
-        curve=curve,
-        error=error,
-        fit_failure=failure,
         config=settings,
         timings=list(planner.timings),
         frames_available=frames_available,
         stitch=stitch,
         settings=config,
     )
-
-
-def fit_path(run: ExplorationRun, *, config: ScrapcutConfig | None = None) -> FitResult:
-    """``scrapcut fit``'s recipe on what the run observed: the global fit and the cutting path.
-
-    The fitter's and the tool path's parameters come from ``config`` (default the run's own);
-    the path file's "source" names the recording and counts the frames the planner used.
-
-    Raises
-    ------
-    ScrapcutError
-        FittingError or ToolpathError, one line each.
-    """
-    from scrapcut_cli.recording.reader import sha256_first_mib
-    from scrapcut_cli.toolpath.recipe import StitchedRecording, fit_stitched
-
-    if run.stitch is None or run.settings is None:
-        raise ExplorationError("this exploration run kept no stitched clouds to fit")
-    settings = run.settings
-    if config is not None:
-        settings = replace(
-            settings,
-            nurbs=config.nurbs,
-            skeleton=config.skeleton,
-            toolpath=config.toolpath,
-            evaluation=config.evaluation,
-        )
-    tally = run.stitch.tally
-    stitched = StitchedRecording(
-        stitch=run.stitch,
-        source={
-            "path": run.source,
-            "sha256_first_mib": sha256_first_mib(run.source),
-            "frames_used": int(tally.frames_with_paint),
-            "frames_skipped": int(tally.frames - tally.frames_with_paint),
-        },
-        frame_id=run.stitch.base_frame,
-        reader_skipped=0,
-        reader_skip_reasons={},
-        stamp_ns=max((s.stamp_ns for s in run.steps), default=0),
-        time_s=0.0,
-    )
-    return fit_stitched(stitched, method=run.method, config=settings)
 
 
 def _same_pose(

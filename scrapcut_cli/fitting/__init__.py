@@ -13,7 +13,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from scrapcut_cli.config import ScrapcutConfig
+from scrapcut_cli.config import FitMethod, ScrapcutConfig, choice_names
 from scrapcut_cli.errors import FittingError
 from scrapcut_cli.fitting.curve import Curve, NurbsModel
 from scrapcut_cli.fitting.nurbs import fit_nurbs, nurbs_to_geomdl, nurbs_to_geomdl_json
@@ -32,7 +32,7 @@ __all__ = [
     "nurbs_to_geomdl_json",
 ]
 
-METHODS = ("nurbs", "skeleton")
+METHODS = choice_names(FitMethod)
 
 #: Length of the chord that gives a NURBS curve's end direction.
 END_CHORD_M = 0.01

@@ -718,9 +718,12 @@ class Recording:
         stamp, msg = last
         points = m.path_points(msg)
         frame = m.frame_id_of(msg)
-        if not frame or not self.tf.has_frame(frame):
+        wanted = (self.config.base_frame or "").lstrip("/")
+        if not frame or frame == wanted:  # already in the base frame: no need to read /tf
             return points
-        base = (self.config.base_frame or "").lstrip("/") or self.tf.root(frame)
+        if not self.tf.has_frame(frame):
+            return points
+        base = wanted or self.tf.root(frame)
         if base == frame:
             return points
         T = self.tf.lookup_one(base, frame, stamp)

@@ -49,7 +49,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from scrapcut_cli import __version__
-from scrapcut_cli.config import SimConfig
+from scrapcut_cli.config import ScanMode, SimConfig, choice_names
 from scrapcut_cli.errors import SimError
 from scrapcut_cli.exploration.decision import Decision, Reachability, ViewPlanner
 from scrapcut_cli.geometry import matrix_to_quat_xyzw
@@ -91,7 +91,7 @@ JOINT_STATES_TOPIC = "/joint_states"
 REFERENCE_TOPIC = "/scrapcut/reference"
 EXPLORATION_TOPIC = "/scrapcut/exploration"
 
-MODES = ("sweep", "survey", "explore")
+MODES = choice_names(ScanMode)
 DEPTH_ENCODINGS = ("16UC1", "32FC1")
 
 #: Simulated clock at the start of every recording: 2023-11-14 22:13:20 UTC.

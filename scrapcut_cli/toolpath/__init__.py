@@ -13,16 +13,13 @@ from scrapcut_cli.toolpath.pathfile import (
     write_path_file,
     write_path_mcap,
 )
-from scrapcut_cli.toolpath.recipe import FitResult, fit_recording
 from scrapcut_cli.toolpath.setpoints import make_cutting_path
 from scrapcut_cli.toolpath.speeds import SpeedTable, load_speed_table
 
 __all__ = [
     "SCHEMA",
     "CuttingPath",
-    "FitResult",
     "SpeedTable",
-    "fit_recording",
     "load_speed_table",
     "make_cutting_path",
     "path_from_dict",

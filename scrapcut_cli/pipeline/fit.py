@@ -1,12 +1,13 @@
-"""What ``scrapcut fit`` does, as one function: recording → stitched clouds → curve → path.
+"""The pipeline's first steps: recording → stitched clouds → curve → cutting path.
 
-:func:`fit_recording` reads a recording (through :mod:`scrapcut_cli.recording`), stitches its
-paint and surface (:func:`~scrapcut_cli.perception.stitch.stitch_recording`), fits the curve
+:func:`stitch_recording_file` reads a recording (through :mod:`scrapcut_cli.recording`) and
+stitches its paint and surface (:func:`~scrapcut_cli.perception.stitch.stitch_recording`) into a
+:class:`StitchedRecording`; :func:`fit_stitched` fits the curve
 (:func:`~scrapcut_cli.fitting.fit_curve`) and makes the cutting path
-(:func:`~scrapcut_cli.toolpath.setpoints.make_cutting_path`). It returns a :class:`FitResult`
-that knows how to become a path file. The two halves, :func:`stitch_recording_file` and
-:func:`fit_stitched`, let a caller fit several methods to one stitched recording. Nothing here
-prints; ``scrapcut fit`` renders the result.
+(:func:`~scrapcut_cli.toolpath.setpoints.make_cutting_path`) into a :class:`FitResult` that knows
+how to become a path file. Split in two so that one stitched recording serves several methods (a
+sweep in ``reproduce``) and an exploration replay can start from the planner's own clouds.
+:class:`~scrapcut_cli.pipeline.job.Pipeline` calls them in order; nothing here prints.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from scrapcut_cli.config import ScrapcutConfig
+from scrapcut_cli.config import FitMethod, ScrapcutConfig, choice_names
 from scrapcut_cli.errors import ToolpathError
 from scrapcut_cli.fitting.curve import Curve
 from scrapcut_cli.geometry import PolylineDistance
@@ -33,7 +34,7 @@ from scrapcut_cli.toolpath.speeds import SpeedTable, load_speed_table
 if TYPE_CHECKING:
     from scrapcut_cli.perception.stitch import StitchResult
 
-METHODS = ("nurbs", "skeleton")
+METHODS = choice_names(FitMethod)
 
 
 @dataclass(frozen=True, eq=False)
@@ -205,6 +206,20 @@ def stitch_recording_file(
     )
 
 
+def check_fit_options(
+    method: str, config: ScrapcutConfig, speeds: SpeedTable | None = None
+) -> SpeedTable:
+    """Refuse an unknown method, tool-path parameters out of range, or a material/thickness
+    missing from the speed chart — before minutes of stitching. Returns the speed chart."""
+    if method not in METHODS:
+        raise ToolpathError(f"unknown fitting method {method!r}; known: {', '.join(METHODS)}")
+    check_toolpath_config(config.toolpath)
+    if speeds is None:
+        speeds = load_speed_table(config.toolpath.speed_table)
+    speeds.lookup(config.toolpath.material, config.toolpath.thickness_mm)
+    return speeds
+
+
 def fit_stitched(
     stitched: StitchedRecording,
     *,
@@ -247,47 +262,6 @@ def fit_stitched(
             "total": stitched.time_s + (t2 - t0),
         },
     )
-
-
-def fit_recording(
-    recording: str | os.PathLike[str],
-    *,
-    method: str,
-    config: ScrapcutConfig,
-    speeds: SpeedTable | None = None,
-    progress: Callable[[int, int], None] | None = None,
-) -> FitResult:
-    """Fit the painted line of a recording and make its cutting path (``scrapcut fit``).
-
-    Parameters
-    ----------
-    recording : path
-        An ``.mcap`` file, a ROS 1 ``.bag`` or a ROS 2 bag directory.
-    method : str
-        ``nurbs`` or ``skeleton``.
-    config : ScrapcutConfig
-        Every stage's parameters.
-    speeds : SpeedTable, optional
-        Cutting chart (default: ``config.toolpath.speed_table`` or the bundled one).
-    progress : callable, optional
-        ``progress(frames_done, frames_total)`` after each frame.
-
-    Raises
-    ------
-    ScrapcutError
-        RecordingError, PerceptionError (no paint), FittingError (e.g. the skeleton broke into
-        pieces) or ToolpathError, each with one line for the user.
-    """
-    if method not in METHODS:
-        raise ToolpathError(f"unknown fitting method {method!r}; known: {', '.join(METHODS)}")
-    # Tool-path parameters, the material and the thickness are checked before the recording is
-    # read: a typo should not cost minutes of stitching.
-    check_toolpath_config(config.toolpath)
-    if speeds is None:
-        speeds = load_speed_table(config.toolpath.speed_table)
-    speeds.lookup(config.toolpath.material, config.toolpath.thickness_mm)
-    stitched = stitch_recording_file(recording, config=config, progress=progress)
-    return fit_stitched(stitched, method=method, config=config, speeds=speeds)
 
 
 def _scalars(info: dict[str, Any]) -> dict[str, Any]:

@@ -1,0 +1,197 @@
+"""The batch engine: many independent tasks on Dask distributed, results as they finish.
+
+``batch`` and ``reproduce`` hand their tasks (one pipeline job, or one simulated scan and its
+jobs) to an :class:`Engine`:
+
+- by default a ``LocalCluster`` on this machine: one worker process per core (``workers``), one
+  thread each (the nanny sets ``OMP_NUM_THREADS=1`` and friends, so workers do not fight over
+  the cores);
+- ``scheduler="tcp://host:8786"``: a running cluster (``dask scheduler`` and ``dask worker``
+  processes, or one made by dask-jobqueue on SLURM). Workers read the recordings and write the
+  outputs by the paths they are given, so they must see the same file system (absolute paths);
+- ``scheduler="inline"``: every task in this process, one after the other, without Dask — for
+  debugging and for tests that need no cluster.
+
+A task function must be importable (module level) and take one picklable argument. The engine
+wraps it so that an exception becomes a :class:`TaskLost` result instead of stopping the run; a
+worker that dies is Dask's to handle (its tasks go to the other workers, up to
+``distributed.scheduler.allowed-failures`` times), after which the task is reported lost too.
+Nothing here prints; ``on_done(index, result)`` is called in this process, in completion order.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Any, Generic, TypeVar
+
+from scrapcut_cli.errors import PipelineError
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+#: ``--scheduler inline``: no Dask, tasks run in this process.
+INLINE = "inline"
+#: How long to wait for a scheduler address to answer, seconds.
+CONNECT_TIMEOUT_S = 10.0
+
+
+@dataclass(frozen=True)
+class TaskLost:
+    """A task that returned no result: it raised (``error`` names the exception and where), or
+    its worker died more often than Dask allows (``KilledWorker``)."""
+
+    error: str
+
+    def __str__(self) -> str:
+        return self.error
+
+
+@dataclass(frozen=True)
+class _Guarded(Generic[T, R]):
+    """``fn`` with every exception turned into a :class:`TaskLost` (picklable: ``fn`` is a
+    module-level function, pickled by reference)."""
+
+    fn: Callable[[T], R]
+
+    def __call__(self, task: T) -> R | TaskLost:
+        try:
+            return self.fn(task)
+        except Exception as exc:  # a bug in one task must not abort a thousand others
+            where = traceback.extract_tb(exc.__traceback__)[-1]
+            return TaskLost(
+                f"internal error: {type(exc).__name__}: {exc} "
+                f"({os.path.basename(where.filename)}:{where.lineno})"
+            )
+
+
+def default_workers() -> int:
+    """One local worker per core."""
+    return max(1, os.cpu_count() or 1)
+
+
+class Engine:
+    """Run tasks on Dask (see the module docstring). Use as a context manager; the cluster is
+    started on the first :meth:`run` that has work, so a batch with nothing to do starts none.
+
+    Parameters
+    ----------
+    scheduler : str, optional
+        ``tcp://host:port`` of a running scheduler, :data:`INLINE`, or None for a local cluster.
+    workers : int, optional
+        Local cluster size (default: one per core); ignored with a scheduler address.
+    """
+
+    def __init__(self, *, scheduler: str | None = None, workers: int | None = None) -> None:
+        if workers is not None and workers < 1:
+            raise PipelineError(f"workers must be at least 1, got {workers}")
+        if scheduler is not None and scheduler != INLINE and "://" not in scheduler:
+            raise PipelineError(
+                f"scheduler address {scheduler!r} is not an address like tcp://host:8786 "
+                f"(or '{INLINE}')"
+            )
+        self.scheduler = scheduler
+        self.workers = workers if workers is not None else default_workers()
+        self._cluster: Any = None
+        self._client: Any = None
+
+    def describe(self) -> str:
+        """Where the tasks run, for reports (``local cluster, 2 workers``)."""
+        if self.scheduler == INLINE:
+            return "inline (this process, no Dask)"
+        if self.scheduler is not None:
+            return f"Dask scheduler {self.scheduler}"
+        return f"Dask local cluster, {self.workers} worker(s) × 1 thread"
+
+    def __enter__(self) -> Engine:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Disconnect, and stop the local cluster if this engine started it."""
+        client, cluster = self._client, self._cluster
+        self._client = self._cluster = None
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+
+    def run(
+        self,
+        fn: Callable[[T], R],
+        tasks: Sequence[T],
+        *,
+        keys: Sequence[str],
+        on_done: Callable[[int, R | TaskLost], None],
+    ) -> None:
+        """Run ``fn(task)`` for every task; ``on_done(index, result)`` as each finishes.
+
+        ``keys`` name the tasks on the cluster (unique; e.g. a content hash), so that the
+        scheduler's dashboard and logs say which run is which.
+        """
+        if len(keys) != len(tasks):
+            raise ValueError("one key per task")
+        if not tasks:
+            return
+        guarded = _Guarded(fn)
+        if self.scheduler == INLINE:
+            for index, task in enumerate(tasks):
+                on_done(index, guarded(task))
+            return
+        from distributed import as_completed
+
+        client = self._connect()
+        futures = [
+            client.submit(guarded, task, key=key, pure=False)
+            for task, key in zip(tasks, keys, strict=True)
+        ]
+        index_of = {future.key: i for i, future in enumerate(futures)}
+        try:
+            for future in as_completed(futures):
+                index = index_of[future.key]
+                if future.status == "finished":
+                    on_done(index, future.result())
+                else:
+                    exc = future.exception()
+                    on_done(index, TaskLost(f"lost on the cluster: {type(exc).__name__}: {exc}"))
+                future.release()
+        finally:
+            for future in futures:
+                future.cancel()
+
+    def _connect(self) -> Any:
+        if self._client is not None:
+            return self._client
+        from distributed import Client, LocalCluster
+
+        if self.scheduler is None:
+            try:
+                self._cluster = LocalCluster(
+                    n_workers=self.workers,
+                    threads_per_worker=1,
+                    processes=True,
+                    dashboard_address=None,
+                    silence_logs=logging.ERROR,
+                )
+            except (OSError, RuntimeError) as exc:
+                raise PipelineError(f"cannot start a local Dask cluster: {exc}") from None
+            self._client = Client(self._cluster)
+            return self._client
+        try:
+            self._client = Client(self.scheduler, timeout=CONNECT_TIMEOUT_S)
+        except (OSError, TimeoutError) as exc:
+            raise PipelineError(
+                f"cannot reach the Dask scheduler at {self.scheduler} ({type(exc).__name__}: {exc})"
+            ) from None
+        return self._client

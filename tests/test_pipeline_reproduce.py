@@ -1,0 +1,145 @@
+"""Tests of scrapcut_cli.pipeline.reproduce: options, checks, config, and seeds (inline engine).
+
+The end-to-end command (simulate → fit → eval) is tested in tests/test_commands_reproduce.py.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from scrapcut_cli.config import ScrapcutConfig, load_config
+from scrapcut_cli.errors import ConfigError, PipelineError
+from scrapcut_cli.pipeline.engine import INLINE, Engine
+from scrapcut_cli.pipeline.reproduce import (
+    PAPER_OBJECTS,
+    REAL_ROBOT_OBJECTS,
+    config_to_toml,
+    machine_description,
+    parse_seeds,
+    reproduce,
+    resolve_objects,
+    seeds_text,
+)
+
+
+def test_objects_default_to_the_papers_five_and_all_adds_the_robot_shapes() -> None:
+    assert resolve_objects([]) == PAPER_OBJECTS
+    assert resolve_objects(["all"]) == PAPER_OBJECTS + REAL_ROBOT_OBJECTS
+    assert resolve_objects(["basket", "cylinder", "basket"]) == ("basket", "cylinder")
+    with pytest.raises(PipelineError, match=r"unknown object 'teapot'; known: .*cylinder"):
+        resolve_objects(["teapot"])
+
+
+def test_config_toml_reads_back_as_the_same_config(tmp_path: Path) -> None:
+    config = (
+        ScrapcutConfig()
+        .override("skeleton", leaf_size_m=0.02)
+        .override("paint", hsv=(350.0, 20.0, 0.5, 0.3))
+        .override("sim", noise="yard", seed=7)
+    )
+    path = tmp_path / "config.toml"
+    path.write_text(config_to_toml(config))
+    assert load_config(path) == config
+    assert load_config(path).to_dict() == config.to_dict()
+
+
+def test_refuses_to_replace_a_folder_that_is_not_a_reproduce_output(tmp_path: Path) -> None:
+    precious = tmp_path / "thesis"
+    precious.mkdir()
+    (precious / "chapter1.tex").write_text("...")
+    with pytest.raises(PipelineError, match="is not a scrapcut reproduce output"):
+        reproduce(precious, objects=["cylinder"], methods=["nurbs"], config=ScrapcutConfig())
+    assert (precious / "chapter1.tex").read_text() == "..."
+    a_file = tmp_path / "file.txt"
+    a_file.write_text("x")
+    with pytest.raises(PipelineError, match="is not a folder"):
+        reproduce(a_file, objects=["cylinder"], methods=["nurbs"], config=ScrapcutConfig())
+
+
+def test_bad_options_fail_before_any_work(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    explore = ScrapcutConfig().override("sim", mode="survey")
+    with pytest.raises(PipelineError, match="unknown mode 'survey'"):
+        reproduce(out, objects=["cylinder"], methods=["nurbs"], config=explore)
+    with pytest.raises(PipelineError, match="no seeds given"):
+        reproduce(out, objects=["cylinder"], methods=["nurbs"], config=ScrapcutConfig(), seeds=[])
+    with pytest.raises(PipelineError, match="seeds must be non-negative"):
+        reproduce(out, objects=["cylinder"], methods=["nurbs"], config=ScrapcutConfig(), seeds=[-1])
+    with pytest.raises(ConfigError, match=r"sim\.seed = .* is outside"):
+        reproduce(
+            out, objects=["cylinder"], methods=["nurbs"], config=ScrapcutConfig(), seeds=[2**40]
+        )
+    # Before, an infinite leaf passed the check and reached scipy after the scan (a traceback).
+    with pytest.raises(PipelineError, match="leaf sizes must be positive"):
+        reproduce(
+            out,
+            objects=["cylinder"],
+            methods=["skeleton"],
+            config=ScrapcutConfig(),
+            leaf_sweep_m=[0.005, float("inf")],
+        )
+    assert not out.exists()
+
+
+def test_machine_description_names_cores_and_python() -> None:
+    text = machine_description()
+    assert "cores" in text and "Python 3." in text
+
+
+def test_seeds_parse_ranges_and_lists() -> None:
+    assert parse_seeds("0-4") == (0, 1, 2, 3, 4)
+    assert parse_seeds("7") == (7,)
+    assert parse_seeds("0-2, 10,1") == (0, 1, 2, 10)
+    for bad, message in (("3-1", "backwards"), ("a-b", "look like"), ("-1", "look like"),
+                         ("0-5000", "more than")):  # fmt: skip
+        with pytest.raises(PipelineError, match=message):
+            parse_seeds(bad)
+    assert seeds_text([0]) == "seed 0"
+    assert seeds_text([0, 1, 2]) == "seeds 0–2 (3)"
+    assert seeds_text([0, 5]) == "seeds 0, 5 (2)"
+
+
+@pytest.mark.slow
+def test_several_seeds_give_table1_with_intervals(tmp_path: Path) -> None:
+    """Two seeds of one small sweep (inline engine): one row per seed, Table I as mean ±
+    interval over them, and each seed's own files."""
+    config = ScrapcutConfig().override("sim", width=160, height=120, mode="sweep", views=3)
+    progress: list[tuple[int, int, str]] = []
+    with Engine(scheduler=INLINE) as engine:
+        result = reproduce(
+            tmp_path / "out",
+            objects=["planar_box"],
+            methods=["nurbs"],
+            config=config,
+            seeds=[0, 1],
+            engine=engine,
+            plots=False,
+            progress=lambda *p: progress.append(p),
+        )
+    assert [p[:2] for p in progress] == [(1, 2), (2, 2)]
+    assert [(run.object, run.seed) for run in result.runs] == [("planar_box", 0), ("planar_box", 1)]
+    assert all(row.error is not None for row in result.rows)
+    out = tmp_path / "out"
+    assert sorted(p.name for p in (out / "recordings").iterdir()) == [
+        "planar_box_seed0.mcap",
+        "planar_box_seed1.mcap",
+    ]
+    assert (out / "paths" / "planar_box_nurbs_seed1.error.json").is_file()
+    report = json.loads((out / "report.json").read_text())
+    assert [r["seed"] for r in report["rows"]] == [0, 1]
+    (table,) = report["table1"]
+    means = [r["mean_mm"] for r in report["rows"]]
+    assert table["runs"] == 2 and table["failed"] == 0
+    assert table["mean_mm"] == pytest.approx(sum(means) / 2, abs=1e-12)
+    # Two runs: the t quantile with one degree of freedom (12.706) × SD / sqrt(2).
+    half = 12.706 * abs(means[0] - means[1]) / 2**0.5 / 2**0.5
+    assert table["mean_mm_ci95"] == pytest.approx(half, rel=1e-3)
+    markdown = (out / "report.md").read_text()
+    assert "seeds 0–1 (2)" in markdown and "| planar_box | nurbs (oracle views) | 2/2 |" in markdown
+    assert f"{table['mean_mm']:.2f} ± {half:.2f}" in markdown
+    assert result.table_markdown in markdown.replace(
+        "# Table I reproduced on the simulator\n\n", ""
+    )
