@@ -56,6 +56,11 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
         "convert",
         "Convert a recording to MCAP, a ROS 1 bag or a ROS 2 bag.",
     ),
+    "batch": (
+        "scrapcut_cli.commands.batch",
+        "batch",
+        "Fit many recordings × a parameter grid on Dask; one table of results.",
+    ),
 }
 
 

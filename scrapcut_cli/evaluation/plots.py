@@ -5,6 +5,8 @@
 - :func:`plot_paths` — reference and fitted curves, top (x–y) and side views, equal aspect;
 - :func:`plot_leaf_sweep` — skeleton mean error against leaf size, with the NURBS mean for
   comparison (the paper's Fig. 3);
+- :func:`plot_parameter_study` — mean error against any parameter, one line per method (the
+  per-parameter figures of ``scrapcut batch``);
 - :func:`write_plots` — all that apply to a set of report rows, one file per object.
 
 Axes are millimetres; positions are in the base frame.
@@ -13,7 +15,7 @@ Axes are millimetres; positions are in the base frame.
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -160,6 +162,41 @@ def plot_leaf_sweep(rows: Sequence[ReportRow], out_path: str | Path, *, title: s
     ax.grid(True, alpha=0.3)
     # Below the axes: error bars and reference lines can be anywhere inside them.
     fig.legend(loc="outside lower center", ncols=3, fontsize=9)
+    return _save(fig, out_path)
+
+
+def plot_parameter_study(
+    series: Mapping[str, tuple[Sequence[float], Sequence[float], Sequence[float]]],
+    out_path: str | Path,
+    *,
+    xlabel: str,
+    ylabel: str = "mean distance to the fitted curve [mm]",
+    title: str,
+) -> Path:
+    """Error against a parameter's value, one line per series (Fig. 3 generalised to any grid
+    parameter of ``scrapcut batch``): ``series[label] = (values, means, spreads)``, the means
+    drawn with ± spread error bars. A series named after a method takes its colour."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(7.0, 4.5), layout="constrained")
+    for i, (label, (x, y, spread)) in enumerate(sorted(series.items())):
+        method = label.split()[0] if label else ""
+        colour = METHOD_COLOURS.get(method, _FALLBACK[i % len(_FALLBACK)])
+        ax.errorbar(
+            np.asarray(x, dtype=np.float64),
+            np.asarray(y, dtype=np.float64),
+            yerr=np.asarray(spread, dtype=np.float64),
+            marker="o",
+            capsize=3,
+            color=colour,
+            label=label,
+        )
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_ylim(bottom=0.0)
+    ax.set_title(title)
+    ax.grid(True, alpha=0.3)
+    if series:
+        fig.legend(loc="outside lower center", ncols=3, fontsize=9)
     return _save(fig, out_path)
 
 
