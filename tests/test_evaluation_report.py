@@ -182,3 +182,44 @@ def test_rich_table_renders_every_row() -> None:
     assert "paper" in lines[nurbs + 1] and "3.01" in lines[nurbs + 1] and "7.03" in lines[nurbs + 1]
     assert any("skeleton" in ln for ln in lines)
     assert "Worse than the paper on 3 of 8 shared figures" in text
+
+
+def test_oracle_rows_are_labelled_in_every_rendering() -> None:
+    from dataclasses import replace
+
+    row = replace(offset_row("cylinder", "skeleton", 2.0, leaf_size_m=0.005), oracle_views=True)
+    assert row.label == "skeleton 5 mm (oracle views)"
+    assert "| cylinder | skeleton 5 mm (oracle views) |" in render_markdown([row])
+    (record,) = json.loads(render_json([row]))
+    assert record["oracle_views"] is True and record["label"] == row.label
+    (line,) = csv.DictReader(io.StringIO(render_csv([row])))
+    assert line["oracle_views"] == "True"
+
+
+def test_aggregates_over_seeds_skip_failed_runs_and_give_t_intervals() -> None:
+    from scrapcut_cli.evaluation.report import aggregate_records, aggregate_rows
+
+    rows = [offset_row("cylinder", "nurbs", mm) for mm in (1.0, 2.0, 3.0, 4.0)]
+    rows.append(ReportRow("cylinder", "nurbs", None, failure="no paint"))
+    (agg,) = aggregate_rows(rows)
+    assert (agg.runs, agg.failed) == (5, 1)
+    assert agg.mean["mean_mm"] == pytest.approx(2.5, abs=1e-9)
+    # SD of 1..4 is 1.291; t(0.975, 3 dof) = 3.182; half width 3.182 * 1.291 / 2 = 2.054.
+    assert agg.half_width["mean_mm"] == pytest.approx(2.054, abs=1e-3)
+    assert agg.interval_text("mean_mm") == "2.50 ± 2.05"
+    assert agg.interval_text("coverage", percent=True) == "100.0 ± 0.0%"
+    (record,) = aggregate_records([agg], paper=load_paper_table())
+    assert record["worse_than_paper"] == ["min_mm"]  # 1 mm offsets and more: min 2.5 > 0.30
+    assert record["notes"] == ["no paint"]
+
+
+def test_marked_sections_are_replaced_or_refused() -> None:
+    from scrapcut_cli.evaluation.report import replace_marked_section
+
+    begin = "<!-- scrapcut:t begin (generated: do not edit by hand) -->"
+    end = "<!-- scrapcut:t end -->"
+    text = f"a\n{begin}\nold\n{end}\nb\n"
+    assert replace_marked_section(text, "t", "new") == f"a\n{begin}\nnew\n{end}\nb\n"
+    for bad in (f"a\n{end}\n{begin}\n", f"{begin}\n{begin}\n{end}\n", "no markers\n"):
+        with pytest.raises(EvaluationError, match="expected one"):
+            replace_marked_section(bad, "t", "new")

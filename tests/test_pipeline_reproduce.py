@@ -102,44 +102,49 @@ def test_seeds_parse_ranges_and_lists() -> None:
     assert seeds_text([0, 5]) == "seeds 0, 5 (2)"
 
 
-@pytest.mark.slow
-def test_several_seeds_give_table1_with_intervals(tmp_path: Path) -> None:
-    """Two seeds of one small sweep (inline engine): one row per seed, Table I as mean ±
-    interval over them, and each seed's own files."""
-    config = ScrapcutConfig().override("sim", width=160, height=120, mode="sweep", views=3)
+def test_several_seeds_give_table1_with_intervals(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Three seeds through the inline engine, the scans replaced by curves 1, 2 and 3 mm off a
+    straight reference: one row per seed, Table I as the mean ± the 95 % interval over them."""
+    from pipeline_fakes import fake_scan
+
+    from scrapcut_cli.pipeline import reproduce as module
+
+    planned: list[module.ScanTask] = []
+
+    def recording_fake(task: module.ScanTask) -> module.ScanRun:
+        planned.append(task)
+        return fake_scan(task)
+
+    monkeypatch.setattr(module, "run_scan", recording_fake)
     progress: list[tuple[int, int, str]] = []
     with Engine(scheduler=INLINE) as engine:
         result = reproduce(
             tmp_path / "out",
-            objects=["planar_box"],
+            objects=["cylinder"],
             methods=["nurbs"],
-            config=config,
-            seeds=[0, 1],
+            config=ScrapcutConfig().override("sim", mode="explore"),  # a scan per method
+            seeds=[0, 1, 2],
             engine=engine,
             plots=False,
             progress=lambda *p: progress.append(p),
         )
-    assert [p[:2] for p in progress] == [(1, 2), (2, 2)]
-    assert [(run.object, run.seed) for run in result.runs] == [("planar_box", 0), ("planar_box", 1)]
-    assert all(row.error is not None for row in result.rows)
-    out = tmp_path / "out"
-    assert sorted(p.name for p in (out / "recordings").iterdir()) == [
-        "planar_box_seed0.mcap",
-        "planar_box_seed1.mcap",
-    ]
-    assert (out / "paths" / "planar_box_nurbs_seed1.error.json").is_file()
-    report = json.loads((out / "report.json").read_text())
-    assert [r["seed"] for r in report["rows"]] == [0, 1]
+    assert [t.stem for t in planned] == [f"cylinder_nurbs_seed{s}" for s in (0, 1, 2)]
+    assert [t.suffix for t in planned] == ["_seed0", "_seed1", "_seed2"]
+    assert [p[:2] for p in progress] == [(1, 3), (2, 3), (3, 3)]
+    assert [(run.object, run.seed) for run in result.runs] == [("cylinder", s) for s in (0, 1, 2)]
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert [r["seed"] for r in report["rows"]] == [0, 1, 2]
     (table,) = report["table1"]
-    means = [r["mean_mm"] for r in report["rows"]]
-    assert table["runs"] == 2 and table["failed"] == 0
-    assert table["mean_mm"] == pytest.approx(sum(means) / 2, abs=1e-12)
-    # Two runs: the t quantile with one degree of freedom (12.706) × SD / sqrt(2).
-    half = 12.706 * abs(means[0] - means[1]) / 2**0.5 / 2**0.5
-    assert table["mean_mm_ci95"] == pytest.approx(half, rel=1e-3)
-    markdown = (out / "report.md").read_text()
-    assert "seeds 0–1 (2)" in markdown and "| planar_box | nurbs (oracle views) | 2/2 |" in markdown
-    assert f"{table['mean_mm']:.2f} ± {half:.2f}" in markdown
+    # Means 1, 2, 3 mm: mean 2, SD 1, t(0.975, 2 dof) = 4.303, half width 4.303 / sqrt(3).
+    assert (table["runs"], table["failed"]) == (3, 0)
+    assert table["mean_mm"] == pytest.approx(2.0, abs=1e-9)
+    assert table["mean_mm_ci95"] == pytest.approx(4.3027 / 3**0.5, rel=1e-4)
+    assert table["paper"]["mean_mm"] == 3.01
+    markdown = (tmp_path / "out" / "report.md").read_text()
+    assert "seeds 0–2 (3)" in markdown
+    assert "| cylinder | nurbs | 3/3 | 2.00 ± 2.48 | 3.01 |" in markdown
     assert result.table_markdown in markdown.replace(
         "# Table I reproduced on the simulator\n\n", ""
     )

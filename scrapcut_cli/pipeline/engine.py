@@ -118,6 +118,13 @@ class Engine:
     ) -> None:
         self.close()
 
+    def start(self) -> Engine:
+        """Start the local cluster (or connect to the scheduler) now rather than on the first
+        :meth:`run` with work, e.g. to time the work alone."""
+        if self.scheduler != INLINE:
+            self._connect()
+        return self
+
     def close(self) -> None:
         """Disconnect, and stop the local cluster if this engine started it."""
         client, cluster = self._client, self._cluster
