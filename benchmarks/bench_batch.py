@@ -20,7 +20,8 @@ import time
 from pathlib import Path
 
 from scrapcut_cli.config import ScrapcutConfig
-from scrapcut_cli.pipeline.batch import batch, collect_inputs
+from scrapcut_cli.pipeline.batch import batch
+from scrapcut_cli.pipeline.batch_inputs import collect_inputs
 from scrapcut_cli.pipeline.engine import Engine
 from scrapcut_cli.pipeline.reproduce import machine_description
 

@@ -27,14 +27,12 @@ from perception_scenes import write_scene_recording as write_scene
 from scrapcut_cli.cli import cli
 from scrapcut_cli.config import ScrapcutConfig
 from scrapcut_cli.errors import PipelineError
-from scrapcut_cli.pipeline.batch import (
+from scrapcut_cli.pipeline.batch import BatchResult, batch, plan_runs
+from scrapcut_cli.pipeline.batch_inputs import (
     BatchInput,
-    BatchResult,
-    batch,
     collect_inputs,
     content_hash,
     load_grid,
-    plan_runs,
     read_manifest,
 )
 from scrapcut_cli.pipeline.engine import Engine
@@ -299,6 +297,14 @@ def test_a_finished_batch_does_no_work(
     refused = CliRunner().invoke(cli, [*args, "-o", str(tmp_path / "notes")])
     assert refused.exit_code == 1 and "not a scrapcut batch output" in refused.stderr
     assert (tmp_path / "notes" / "thesis.tex").read_text() == "keep"
+    # With work to do, a dead address is one error and leaves no folder behind.
+    with (
+        Engine(scheduler="tcp://127.0.0.1:9", connect_timeout_s=0.5) as engine,
+        pytest.raises(PipelineError, match="cannot reach the Dask scheduler"),
+    ):
+        batch(inputs, out_dir=tmp_path / "new", grid=grid, config=ScrapcutConfig(),
+              engine=engine)  # fmt: skip
+    assert not (tmp_path / "new").exists()
 
 
 def test_killing_a_worker_mid_batch_loses_no_result(

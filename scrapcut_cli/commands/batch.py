@@ -83,7 +83,8 @@ def batch(
     """
     from scrapcut_cli.commands._console import err, out, progress
     from scrapcut_cli.pipeline.batch import batch as run_batch
-    from scrapcut_cli.pipeline.batch import check_batch_dir, collect_inputs, load_grid
+    from scrapcut_cli.pipeline.batch import check_batch_dir
+    from scrapcut_cli.pipeline.batch_inputs import collect_inputs, load_grid
     from scrapcut_cli.pipeline.engine import Engine
 
     if no_eval and reference is not None:

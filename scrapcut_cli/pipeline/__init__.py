@@ -13,7 +13,9 @@ and ``batch`` all run :class:`~scrapcut_cli.pipeline.job.Pipeline` jobs; the sta
 - :mod:`.engine` — :class:`~.engine.Engine`: tasks on Dask distributed (a local cluster, a
   scheduler address) or inline;
 - :mod:`.reproduce` — ``scrapcut reproduce``: simulated scans × seeds → Table I;
-- :mod:`.batch` — ``scrapcut batch``: recordings × a parameter grid → one table.
+- :mod:`.batch` — ``scrapcut batch``: recordings × a parameter grid → one table, resumable
+  (:mod:`.batch_inputs` reads recordings, manifests and grids; :mod:`.batch_report` writes the
+  table and the report).
 
 Import submodules directly: ``from scrapcut_cli.pipeline.job import Job, Pipeline``.
 """

@@ -84,9 +84,17 @@ class Engine:
         ``tcp://host:port`` of a running scheduler, :data:`INLINE`, or None for a local cluster.
     workers : int, optional
         Local cluster size (default: one per core); ignored with a scheduler address.
+    connect_timeout_s : float
+        How long to wait for a scheduler address to answer.
     """
 
-    def __init__(self, *, scheduler: str | None = None, workers: int | None = None) -> None:
+    def __init__(
+        self,
+        *,
+        scheduler: str | None = None,
+        workers: int | None = None,
+        connect_timeout_s: float = CONNECT_TIMEOUT_S,
+    ) -> None:
         if workers is not None and workers < 1:
             raise PipelineError(f"workers must be at least 1, got {workers}")
         if scheduler is not None and scheduler != INLINE and "://" not in scheduler:
@@ -96,6 +104,7 @@ class Engine:
             )
         self.scheduler = scheduler
         self.workers = workers if workers is not None else default_workers()
+        self.connect_timeout_s = connect_timeout_s
         self._cluster: Any = None
         self._client: Any = None
 
@@ -196,7 +205,7 @@ class Engine:
             self._client = Client(self._cluster)
             return self._client
         try:
-            self._client = Client(self.scheduler, timeout=CONNECT_TIMEOUT_S)
+            self._client = Client(self.scheduler, timeout=self.connect_timeout_s)
         except (OSError, TimeoutError) as exc:
             raise PipelineError(
                 f"cannot reach the Dask scheduler at {self.scheduler} ({type(exc).__name__}: {exc})"
