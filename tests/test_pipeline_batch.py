@@ -191,7 +191,8 @@ def cluster(
     procs = [
         subprocess.Popen(
             [dask, "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
-             "--scheduler-file", str(scheduler_file), "--idle-timeout", "600s"],
+             "--dashboard-address", ":0", "--scheduler-file", str(scheduler_file),
+             "--idle-timeout", "600s"],
             stdout=log, stderr=subprocess.STDOUT, env=env,
         )
     ]  # fmt: skip

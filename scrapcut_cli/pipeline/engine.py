@@ -197,7 +197,9 @@ class Engine:
                     n_workers=self.workers,
                     threads_per_worker=1,
                     processes=True,
-                    dashboard_address=None,
+                    # A random free port: a second cluster on the machine (another user's
+                    # batch) must not collide on the default 8787 or warn about it.
+                    dashboard_address=":0",
                     silence_logs=logging.ERROR,
                 )
             except (OSError, RuntimeError) as exc:
