@@ -142,15 +142,9 @@ def main() -> None:
 def side_starts(args: argparse.Namespace, out_dir: Path) -> None:
     """The slanted piece explored from one face, with and without looking past the ridge.
 
-    The simulator starts explore mode at the middle of the line, which on this piece is the
-    ridge itself (both faces in view). The paper's robot started on one face; this factory
-    keeps the simulator's robot (its ``reachable``) but starts from a sweep view 15 % or 85 %
-    along the line instead.
+    The paper's robot started on one face: the worker points the robot 15 % or 85 % along
+    the line (``--start-fraction``; the simulator's worker lands near, not on, that view).
     """
-    from scrapcut_cli.exploration.planner import ExplorationPlanner
-    from scrapcut_cli.perception.paint import PAINT_PRESETS
-    from scrapcut_cli.sim.recorder import place_object
-    from scrapcut_cli.sim.views import sweep_views
 
     print()
     print("slanted from one face (the paper's real-robot start): look past the ridge or not")
@@ -171,25 +165,10 @@ def side_starts(args: argparse.Namespace, out_dir: Path) -> None:
                     width=args.width,
                     height=args.height,
                     seed=args.seed,
+                    start_fraction=start,
                 )
-                views = sweep_views(place_object(sim), distance_m=sim.view_distance_m, count=21)
-                start_view = views[round(start * 20)]
-
-                def factory(
-                    context: object,
-                    view: np.ndarray = start_view,
-                    config: ScrapcutConfig = config,
-                    paint: str = sim.paint,
-                ) -> ExplorationPlanner:
-                    return ExplorationPlanner(
-                        view,
-                        reachable=context.reachable,  # type: ignore[attr-defined]
-                        hsv=PAINT_PRESETS[paint].hsv,
-                        config=config,
-                    )
-
                 path = out_dir / f"slanted_{method}_start{start:g}_lookpast{int(look_past)}.mcap"
-                result = record(sim, path, planner_factory=factory)
+                result = record(sim, path, planner_factory=planner_factory(config))
                 run = replay_exploration(path)
                 curve, mark = _global_fit(run.paint_points, method, config)
                 error = path_error(curve.points, run_reference(path))  # type: ignore[attr-defined]

@@ -4,12 +4,15 @@
 ``ObjectScan`` renders a simulator piece with the simulator's ray caster and its D435i noise
 (open3d, no pybullet). ``explore`` runs a planner against either; ``write_exploration_recording``
 writes the frames and the planner's log as a small MCAP that ``scrapcut explore`` can replay.
+``reach_if`` answers a planner's reachability queries from a test of the pose, as a cell would
+(``REACH_ALL``, ``REACH_NONE``).
 Small images keep every loop under a few seconds. Seeded: the same calls give the same bytes.
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -18,10 +21,26 @@ import numpy as np
 from numpy.typing import NDArray
 from perception_scenes import SceneNoise, cylinder_top_line, render_cylinder, small_camera, top_view
 
-from scrapcut_cli.exploration.decision import Decision, ViewPlanner
+from scrapcut_cli.cell import Decision, Reach, Reachability, ReachAnswer, ReachQuery, ViewPlanner
 from scrapcut_cli.recording.frame import CameraModel, Frame
 
 FloatArray = NDArray[np.float64]
+
+
+def reach_if(test: Callable[[FloatArray], bool]) -> Reachability:
+    """A cell (no robot) that can place the camera exactly where ``test(T_base_cam)`` says."""
+
+    def answer(query: ReachQuery) -> ReachAnswer:
+        if test(query.T_base_cam):
+            return ReachAnswer(True, Reach.OK, T_base_cam=query.T_base_cam.copy())
+        return ReachAnswer(False, Reach.IK)
+
+    return answer
+
+
+#: Cells that can reach every pose, and none.
+REACH_ALL = reach_if(lambda T: True)
+REACH_NONE = reach_if(lambda T: False)
 
 
 @dataclass

@@ -12,7 +12,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner, Result
-from exploration_scenes import CylinderScan, LoopResult, explore, write_exploration_recording
+from exploration_scenes import (
+    REACH_ALL,
+    CylinderScan,
+    LoopResult,
+    explore,
+    write_exploration_recording,
+)
 from helpers import one_line_error
 from perception_scenes import top_view
 
@@ -29,7 +35,7 @@ def _run(*args: object) -> Result:
 def explored(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, LoopResult]:
     scan = CylinderScan()
     planner = ExplorationPlanner(
-        scan.initial_view, reachable=lambda T: True, hsv=PAINT_PRESETS["orange"].hsv
+        scan.initial_view, reachable=REACH_ALL, hsv=PAINT_PRESETS["orange"].hsv
     )
     loop = explore(planner, scan)
     path = tmp_path_factory.mktemp("explore") / "explored.mcap"

@@ -13,12 +13,20 @@ from typing import Any
 
 import numpy as np
 import pytest
-from exploration_scenes import CylinderScan, LoopResult, ObjectScan, explore
+from exploration_scenes import (
+    REACH_ALL,
+    REACH_NONE,
+    CylinderScan,
+    LoopResult,
+    ObjectScan,
+    explore,
+    reach_if,
+)
 
+from scrapcut_cli.cell import Reach, ReachAnswer, ReachQuery, ViewPlanner
 from scrapcut_cli.config import ScrapcutConfig
 from scrapcut_cli.errors import ExplorationError
 from scrapcut_cli.evaluation.metrics import path_error
-from scrapcut_cli.exploration.decision import ViewPlanner
 from scrapcut_cli.exploration.planner import (
     LOG_SCHEMA,
     ExplorationPlanner,
@@ -40,15 +48,11 @@ def _config(**exploration: Any) -> ScrapcutConfig:
     return replace(config, exploration=replace(config.exploration, **exploration))
 
 
-def _always(T: np.ndarray) -> bool:
-    return True
-
-
 def _run(method: str = "nurbs", **exploration: Any) -> tuple[ExplorationPlanner, LoopResult]:
     scan = CylinderScan()
     planner = ExplorationPlanner(
         scan.initial_view,
-        reachable=_always,
+        reachable=REACH_ALL,
         hsv=ORANGE,
         config=_config(method=method, **exploration),
     )
@@ -61,7 +65,7 @@ def pipe_run(request: pytest.FixtureRequest) -> tuple[ExplorationPlanner, LoopRe
 
 
 def test_the_planner_is_a_view_planner() -> None:
-    planner: ViewPlanner = ExplorationPlanner(np.eye(4), reachable=_always, hsv=ORANGE)  # mypy
+    planner: ViewPlanner = ExplorationPlanner(np.eye(4), reachable=REACH_ALL, hsv=ORANGE)  # mypy
     first = planner.start()
     assert np.array_equal(first.T_base_cam, np.eye(4)) and not first.stop
 
@@ -117,7 +121,8 @@ def test_the_log_is_json_with_the_documented_keys(
             assert key in entry
         assert entry["schema"] == LOG_SCHEMA
         for query in entry["reachability"]:
-            assert set(query) == {"position", "orientation_xyzw", "ok"}
+            assert set(query) == {"position", "orientation_xyzw", "ok", "reason"}
+            assert query["reason"] == "ok"  # every pose is reachable here
     first = log[0]
     assert first["method"] == planner.method
     assert first["config"]["exploration"]["delta_size"] == planner.config.exploration.delta_size
@@ -138,7 +143,7 @@ def test_same_frames_and_answers_give_the_same_decisions() -> None:
 
 def test_reobserving_known_paint_is_not_growth() -> None:
     scan = CylinderScan(depth_sigma_m=0.001)
-    planner = ExplorationPlanner(scan.initial_view, reachable=_always, hsv=ORANGE)
+    planner = ExplorationPlanner(scan.initial_view, reachable=REACH_ALL, hsv=ORANGE)
     planner.start()
     first = planner.observe(scan.capture(scan.initial_view))
     assert first.info["action"] == "extrapolate"
@@ -151,11 +156,11 @@ def test_reobserving_known_paint_is_not_growth() -> None:
 
 def test_no_reachable_view_ends_both_directions_with_the_reason() -> None:
     scan = CylinderScan()
-    asked: list[np.ndarray] = []
+    asked: list[ReachQuery] = []
 
-    def never(T: np.ndarray) -> bool:
-        asked.append(T)
-        return False
+    def never(query: ReachQuery) -> ReachAnswer:
+        asked.append(query)
+        return ReachAnswer(False, Reach.COLLISION, "panda_hand/observed")
 
     planner = ExplorationPlanner(scan.initial_view, reachable=never, hsv=ORANGE)
     loop = explore(planner, scan)
@@ -165,6 +170,8 @@ def test_no_reachable_view_ends_both_directions_with_the_reason() -> None:
     assert planner.endpoints_found == 0
     logged = loop.log[0]["reachability"]
     assert len(logged) == len(asked) > 0 and not any(q["ok"] for q in logged)
+    assert {q["reason"] for q in logged} == {"collision:panda_hand/observed"}
+    assert not any(q.free_dofs for q in asked)  # the planner searches roll and distance itself
     # The line runs out of the image both ways: its ends were not observed either.
     evidence = loop.log[0]["end_evidence"]
     assert [e["direction"] for e in evidence] == [0, 1]
@@ -177,10 +184,7 @@ def test_ends_seen_in_the_first_view_count_when_no_view_past_them_is_feasible() 
     """A 12 cm line wholly in the initial view on a pipe that goes on past both its ends: the
     robot can reach nothing, but the first frame saw the pipe's bare surface past each end."""
     scan = CylinderScan(length_m=0.12)
-
-    def never(T: np.ndarray) -> bool:
-        return False
-
+    never = REACH_NONE
     planner = ExplorationPlanner(scan.initial_view, reachable=never, hsv=ORANGE)
     loop = explore(planner, scan)
     assert len(loop.frames) == 1
@@ -213,11 +217,7 @@ def test_an_end_behind_an_occluding_ridge_is_not_an_observed_end() -> None:
     up_face = scan.reference[: len(scan.reference) // 2]
     on_face = up_face[np.argmin(np.abs(up_face[:, 2] - 0.17))]
     scan.initial_view = look_at(on_face + 0.3 * face, on_face, up_hint=(0.0, 0.0, 1.0))
-
-    def never(T: np.ndarray) -> bool:
-        return False
-
-    planner = ExplorationPlanner(scan.initial_view, reachable=never, hsv=ORANGE)
+    planner = ExplorationPlanner(scan.initial_view, reachable=REACH_NONE, hsv=ORANGE)
     loop = explore(planner, scan)
     assert [e["reason"] for e in planner.ends] == ["no_feasible_view", "no_feasible_view"]
     assert planner.endpoints_found == 0
@@ -249,7 +249,7 @@ def test_a_sheet_blocked_on_its_seen_side_is_viewed_from_its_other_side() -> Non
     decisions = {}
     for other_side in (True, False):
         planner = ExplorationPlanner(
-            T, reachable=_always, hsv=ORANGE, config=_config(other_side_views=other_side)
+            T, reachable=REACH_ALL, hsv=ORANGE, config=_config(other_side_views=other_side)
         )
         planner.start()
         decisions[other_side] = planner.observe_perceived(seen)
@@ -271,7 +271,7 @@ def test_the_step_budget_stops_the_run() -> None:
 def test_no_paint_in_the_initial_view_stops_with_paint_lost() -> None:
     scan = CylinderScan()
     away = look_at([1.5, 1.5, 0.3], [1.5, 1.5, 0.0], up_hint=(1.0, 0.0, 0.0))  # bare floor
-    planner = ExplorationPlanner(away, reachable=_always, hsv=ORANGE)
+    planner = ExplorationPlanner(away, reachable=REACH_ALL, hsv=ORANGE)
     loop = explore(planner, scan)
     assert len(loop.frames) == 1 and planner.stop_reason == "paint_lost"
     with pytest.raises(ExplorationError, match="already stopped"):
@@ -280,14 +280,14 @@ def test_no_paint_in_the_initial_view_stops_with_paint_lost() -> None:
 
 def test_find_view_steps_back_until_reachable_and_searches_the_roll() -> None:
     target = np.array([0.5, 0.0, 0.2])
-    planner = ExplorationPlanner(np.eye(4), reachable=_always, hsv=ORANGE)
+    planner = ExplorationPlanner(np.eye(4), reachable=REACH_ALL, hsv=ORANGE)
     T = planner.find_view(target, np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]))
     assert T is not None and np.isclose(np.linalg.norm(T[:3, 3] - target), 0.2)
 
     def far_and_flipped(T: np.ndarray) -> bool:
         return bool(np.linalg.norm(T[:3, 3] - target) > 0.299 and T[0, 0] < -0.99)
 
-    planner = ExplorationPlanner(np.eye(4), reachable=far_and_flipped, hsv=ORANGE)
+    planner = ExplorationPlanner(np.eye(4), reachable=reach_if(far_and_flipped), hsv=ORANGE)
     T = planner.find_view(target, np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]))
     assert T is not None
     assert np.isclose(np.linalg.norm(T[:3, 3] - target), 0.3)  # 0.2, 0.225, 0.25, 0.275 refused
@@ -303,7 +303,7 @@ def test_find_view_keeps_the_camera_off_observed_obstacles_without_asking() -> N
     g = np.arange(-0.06, 0.0601, 0.004)
     x, y = np.meshgrid(g, g)
     shelf = np.column_stack([0.5 + x.ravel(), y.ravel(), np.full(x.size, 0.45)])
-    planner = ExplorationPlanner(np.eye(4), reachable=_always, hsv=ORANGE)
+    planner = ExplorationPlanner(np.eye(4), reachable=REACH_ALL, hsv=ORANGE)
     planner.occupancy.add(shelf)
     assert planner.find_view(target, np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])) is None
     assert planner._queries == []  # refused by the occupancy map, never by the robot
@@ -319,25 +319,25 @@ def test_find_view_keeps_the_camera_off_observed_obstacles_without_asking() -> N
 
 def test_bad_parameters_are_named() -> None:
     with pytest.raises(ExplorationError, match=r"exploration\.method"):
-        ExplorationPlanner(np.eye(4), reachable=_always, hsv=ORANGE, config=_config(method="x"))
+        ExplorationPlanner(np.eye(4), reachable=REACH_ALL, hsv=ORANGE, config=_config(method="x"))
     with pytest.raises(ExplorationError, match="max_distance_m"):
         ExplorationPlanner(
             np.eye(4),
-            reachable=_always,
+            reachable=REACH_ALL,
             hsv=ORANGE,
             config=_config(min_distance_m=0.4, max_distance_m=0.3),
         )
     # Infinite lengths passed the old "> 0" check.
     with pytest.raises(ExplorationError, match=r"exploration\.step_m must be a finite number > 0"):
         ExplorationPlanner(
-            np.eye(4), reachable=_always, hsv=ORANGE, config=_config(step_m=float("inf"))
+            np.eye(4), reachable=REACH_ALL, hsv=ORANGE, config=_config(step_m=float("inf"))
         )
     with pytest.raises(ExplorationError, match=r"exploration\.inflation_m must be a finite"):
         ExplorationPlanner(
-            np.eye(4), reachable=_always, hsv=ORANGE, config=_config(inflation_m=float("nan"))
+            np.eye(4), reachable=REACH_ALL, hsv=ORANGE, config=_config(inflation_m=float("nan"))
         )
     with pytest.raises(ExplorationError, match="initial view"):
-        ExplorationPlanner(np.zeros((3, 3)), reachable=_always, hsv=ORANGE)
+        ExplorationPlanner(np.zeros((3, 3)), reachable=REACH_ALL, hsv=ORANGE)
 
 
 def test_thin_points_gives_sorted_voxel_means() -> None:
@@ -359,7 +359,7 @@ def test_slanted_ridge_is_crossed_by_looking_past_it(look_past: bool) -> None:
     finds the other face."""
     scan = ObjectScan("slanted", noise="d435i", width=160, height=120, start=0.15)
     config = _config(look_past=look_past)
-    planner = ExplorationPlanner(scan.initial_view, reachable=_always, hsv=ORANGE, config=config)
+    planner = ExplorationPlanner(scan.initial_view, reachable=REACH_ALL, hsv=ORANGE, config=config)
     loop = explore(planner, scan)
     curve = fit_curve(planner.stitcher.paint_points, "nurbs", replace(config))
     coverage = path_error(curve.points, scan.reference).coverage

@@ -9,9 +9,17 @@ from typing import Any
 
 import numpy as np
 import pytest
-from exploration_scenes import CylinderScan, LoopResult, explore, write_exploration_recording
+from exploration_scenes import (
+    REACH_NONE,
+    CylinderScan,
+    LoopResult,
+    explore,
+    reach_if,
+    write_exploration_recording,
+)
 from perception_scenes import top_view
 
+from scrapcut_cli.cell import Reach, ReachQuery
 from scrapcut_cli.config import ScrapcutConfig
 from scrapcut_cli.errors import ExplorationError
 from scrapcut_cli.exploration.planner import ExplorationPlanner, pose_from_dict, pose_to_dict
@@ -28,9 +36,8 @@ from scrapcut_cli.pipeline.explore import fit_exploration
 ORANGE = PAINT_PRESETS["orange"].hsv
 
 
-def _reachable(T: np.ndarray) -> bool:
-    # A robot that cannot lower the camera below 0.46 m: some queries are refused.
-    return bool(T[2, 3] >= 0.46)
+# A robot that cannot lower the camera below 0.46 m: some queries are refused.
+_reachable = reach_if(lambda T: bool(T[2, 3] >= 0.46))
 
 
 @pytest.fixture(scope="module")
@@ -100,7 +107,7 @@ def test_an_end_observed_without_a_feasible_view_replays_with_its_evidence(
     tmp_path: Path,
 ) -> None:
     scan = CylinderScan(length_m=0.12)  # wholly in the first view; nothing is reachable
-    planner = ExplorationPlanner(scan.initial_view, reachable=lambda T: False, hsv=ORANGE)
+    planner = ExplorationPlanner(scan.initial_view, reachable=REACH_NONE, hsv=ORANGE)
     loop = explore(planner, scan)
     assert [e.get("observed_by", {}).get("how") for e in planner.ends] == ["surface"] * 2
     path = tmp_path / "seen.mcap"
@@ -124,13 +131,14 @@ def test_a_log_from_before_the_evidence_replays_without_it(tmp_path: Path) -> No
     them; their replay must too (the defaults would change the decisions)."""
     scan = CylinderScan(length_m=0.12)
     old = ScrapcutConfig().override("exploration", other_side_views=False, observed_end=False)
-    planner = ExplorationPlanner(
-        scan.initial_view, reachable=lambda T: False, hsv=ORANGE, config=old
-    )
+    planner = ExplorationPlanner(scan.initial_view, reachable=REACH_NONE, hsv=ORANGE, config=old)
     loop = explore(planner, scan)
     log = json.loads(json.dumps(loop.log))
     for key in ("other_side_views", "observed_end"):
         del log[0]["config"]["exploration"][key]
+    assert log[0]["reachability"]
+    for query in log[0]["reachability"]:
+        del query["reason"]  # nor did they log why the robot refused a view
     path = tmp_path / "old.mcap"
     write_exploration_recording(path, loop.frames, log, reference=scan.reference)
     run = replay_exploration(path)
@@ -153,14 +161,18 @@ def test_replay_needs_the_log_and_the_logged_method(
 def test_recorded_answers_check_the_asked_pose() -> None:
     T = look_at([0.5, 0.0, 0.5], [0.5, 0.0, 0.0])
     answers = RecordedAnswers()
-    answers.begin(3, [{**pose_to_dict(T), "ok": True}, {**pose_to_dict(T), "ok": False}])
-    assert answers(T) is True
+    refused = {**pose_to_dict(T), "ok": False, "reason": "collision:panda_hand/observed"}
+    answers.begin(3, [{**pose_to_dict(T), "ok": True, "reason": "ok"}, refused])
+    first = answers(ReachQuery(T))
+    assert first.feasible and first.reason is Reach.OK
+    assert first.T_base_cam is not None and np.allclose(first.T_base_cam, T)
     moved = T.copy()
     moved[0, 3] += 0.001
-    assert answers(moved) is False  # answered from the log, but noted
+    second = answers(ReachQuery(moved))  # answered from the log, but noted
+    assert not second.feasible and second.describe() == "collision:panda_hand/observed"
     assert answers.divergences == [answers.divergences[0]]
     assert answers.divergences[0].startswith("step 3: reachability asked at (501.0")
-    assert answers(T) is False
+    assert not answers(ReachQuery(T)).feasible
     assert "does not have" in answers.divergences[-1]
     answers.begin(4, [{**pose_to_dict(T), "ok": True}])
     answers.finish()
@@ -190,7 +202,9 @@ def test_nearest_view_weighs_position_and_viewing_angle() -> None:
     )
     assert views.nearest(down) == 1  # 0.06 m < 0.02 m + 0.2 m/rad * 0.59 rad
     strict = NearestView(np.array([near_tilted]), match_distance_m=0.1, match_angle_deg=30.0)
-    assert strict.nearest(down) is None and not strict(down)
+    assert strict.nearest(down) is None
+    assert strict(ReachQuery(down)).reason is Reach.NO_RECORD
+    assert views(ReachQuery(down)).feasible
     with pytest.raises(ExplorationError, match="what-if matching"):
         NearestView(np.array([down]), match_distance_m=0.0, match_angle_deg=30.0)
 

@@ -16,28 +16,34 @@ import pytest
 from mcap.reader import make_reader
 from recording_content import assert_same_content
 
+from scrapcut_cli.cell import Decision, PlannerContext, ReachQuery
 from scrapcut_cli.config import ScrapcutConfig, SimConfig
 from scrapcut_cli.errors import SimError
-from scrapcut_cli.exploration.decision import Decision
 from scrapcut_cli.exploration.planner import planner_factory
-from scrapcut_cli.geometry import PolylineDistance, rotation_angle, transform_points
+from scrapcut_cli.geometry import (
+    PolylineDistance,
+    invert_transform,
+    look_at,
+    rotation_angle,
+    transform_points,
+)
 from scrapcut_cli.perception.paint import PAINT_PRESETS, paint_mask
 from scrapcut_cli.recording.frame import Frame
 from scrapcut_cli.recording.reader import open_recording
 from scrapcut_cli.sim import list_objects, record
-from scrapcut_cli.sim.camera import T_HAND_CAMLINK
+from scrapcut_cli.sim.camera import T_CAMLINK_OPTICAL, T_HAND_CAMLINK
 from scrapcut_cli.sim.recorder import (
     COLOR_TOPIC,
     DEPTH_TOPIC,
     INFO_TOPIC,
     RecordResult,
-    SimContext,
     place_object,
     planned_views,
     validate,
+    worker_start_view,
 )
 from scrapcut_cli.sim.robot import Q_READY, PandaSim
-from scrapcut_cli.sim.views import PrePlannedPlanner
+from scrapcut_cli.sim.views import PrePlannedPlanner, views_along
 
 NAMES = [name for name, _ in list_objects()]
 
@@ -175,12 +181,13 @@ def test_reader_returns_exactly_what_the_planner_saw(
         reference = rec.reference()
     assert len(frames) == 8 and len(seen) == 4  # the planner sees the last image of a view
     for mine, read in zip(seen, frames[1::2], strict=True):
-        assert read.stamp_ns == mine.stamp_ns
+        assert read.stamp_ns == mine.stamp_ns and read.index == mine.index
         assert np.array_equal(read.color, mine.color)
         assert np.array_equal(read.depth, mine.depth, equal_nan=True)
         assert np.allclose(read.T_base_cam, mine.T_base_cam, atol=1e-9)
-        # d435i has no hand-eye error: the recorded pose is the true one.
-        assert np.allclose(mine.extras["T_base_cam_true"], mine.T_base_cam, atol=1e-12)
+        # Nothing a reader would not produce (no true pose, no view index).
+        assert mine.extras == read.extras
+        assert (mine.base_frame, mine.camera_frame) == (read.base_frame, read.camera_frame)
     assert reference is not None
     assert np.allclose(reference, place_object(SimConfig()).reference, atol=1e-12)
 
@@ -223,9 +230,13 @@ def test_paint_back_projects_onto_the_reference(
 def test_yard_records_the_nominal_hand_eye_but_renders_the_true_one(tmp_path: Path) -> None:
     config = SimConfig(object="planar_box", noise="yard", width=48, height=36, views=2, seed=5)
     _, frames = capture(config, tmp_path / "yard.mcap")
+    with open_recording(tmp_path / "yard.mcap") as rec:
+        params = json.loads(rec.metadata["scrapcut"]["params"])
+    nominal = np.asarray(params["hand_eye_nominal"]) @ T_CAMLINK_OPTICAL
+    true_mount = np.asarray(params["hand_eye_true"]) @ T_CAMLINK_OPTICAL
     for frame in frames:
-        true = frame.extras["T_base_cam_true"]
         recorded = frame.T_base_cam
+        true = recorded @ invert_transform(nominal) @ true_mount
         # Hand-eye error of 2 mm and 0.3 deg, seen through the flange; the rotation about
         # camera_link moves the optical centre (15 mm away) by at most 0.08 mm more.
         assert np.degrees(rotation_angle(true[:3, :3], recorded[:3, :3])) == pytest.approx(0.3)
@@ -253,20 +264,21 @@ def test_every_object_records_in_every_mode_on_the_default_placement(
     name: str, tmp_path: Path
 ) -> None:
     """All default sweep views are executable; sweep, survey and explore (Algorithm 1 from the
-    piece's default start) run clean: no infeasible view, no collision, no move through it."""
+    worker's start, planning only with what the camera observed) run clean: no infeasible view,
+    no crash into the true piece at a view or on a move."""
     config = SimConfig(object=name, width=32, height=24)
     obj = place_object(config)
     with PandaSim(obj.mesh, T_hand_camlink_nominal=T_HAND_CAMLINK) as robot:
         q = np.asarray(Q_READY)
         for T in planned_views(config, obj):
             solution = robot.plan_view(T, q)
-            assert solution.feasible, solution.reason
+            assert solution.feasible, solution.answer.describe()
             assert solution.q is not None
             q = solution.q
     for mode in ("sweep", "survey"):
         result = record(replace(config, mode=mode, views=2), tmp_path / f"{mode}.mcap")
         assert (result.views, result.infeasible_views, result.collisions) == (2, 0, 0)
-        assert result.motion_collisions == 0
+        assert result.motion_collisions == 0 and result.planned_with == "truth"
         assert result.stop_reason == "done"
     explore = record(
         replace(config, mode="explore", width=160, height=120),
@@ -275,33 +287,38 @@ def test_every_object_records_in_every_mode_on_the_default_placement(
     )
     assert explore.views >= 1 and not explore.stop_reason.startswith("infeasible")
     assert (explore.infeasible_views, explore.collisions, explore.motion_collisions) == (0, 0, 0)
+    assert explore.planned_with == "observed" and explore.min_clearance_m > 0.02
+    with open_recording(tmp_path / "explore.mcap") as rec:
+        assert rec.metadata["scrapcut_result"]["collisions"] == "0"
 
 
 class ToyExplorer:
     """A closed-loop planner: three views stepping along +y from the start view, then stop."""
 
-    def __init__(self, context: SimContext) -> None:
+    def __init__(self, context: PlannerContext) -> None:
         self.context = context
         self.steps = 0
         self.checked: list[bool] = []
+        self.frames: list[Frame] = []
 
     def start(self) -> Decision:
         return Decision(self.context.start_view, "extrapolate", info={"step": 0})
 
     def observe(self, frame: Frame) -> Decision:
         self.steps += 1
+        self.frames.append(frame)
         if self.steps == 3:
             return Decision(None, "done", stop=True, info={"pose": frame.T_base_cam})
         T = self.context.start_view.copy()
         T[1, 3] += 0.03 * self.steps
-        self.checked.append(self.context.reachable(T))
+        self.checked.append(self.context.reachable(ReachQuery(T)).feasible)
         return Decision(T, "extrapolate", info={"k": self.steps})
 
 
 def test_explore_mode_runs_a_closed_loop_planner_and_logs_it(tmp_path: Path) -> None:
     made: list[ToyExplorer] = []
 
-    def factory(context: SimContext) -> ToyExplorer:
+    def factory(context: PlannerContext) -> ToyExplorer:
         made.append(ToyExplorer(context))
         return made[-1]
 
@@ -309,11 +326,67 @@ def test_explore_mode_runs_a_closed_loop_planner_and_logs_it(tmp_path: Path) -> 
     result = record(config, tmp_path / "explore.mcap", planner_factory=factory)
     assert result.views == 3 and result.stop_reason == "done"
     assert made[0].checked == [True, True]
-    assert made[0].context.camera.width == 32
+    context = made[0].context
+    assert context.camera.width == 32 and context.paint == "orange"
+    assert np.array_equal(context.start_view, worker_start_view(config, place_object(config)))
+    # The planner sees the frames as a reader returns them: no true pose, nothing extra.
+    assert all(set(f.extras) == {"depth_stamp_ns"} for f in made[0].frames)
     with open_recording(tmp_path / "explore.mcap") as rec:
         log = rec.exploration_log()
+        params = json.loads(rec.metadata["scrapcut"]["params"])
     assert [step["reason"] for step in log] == ["extrapolate", "extrapolate", "done"]
     assert log[-1]["stop"] is True and np.asarray(log[-1]["pose"]).shape == (4, 4)
+    assert np.allclose(params["start_view"], context.start_view)
+    assert params["observed"]["voxel_m"] == pytest.approx(0.01)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_the_start_view_is_where_a_worker_points_the_robot(seed: int) -> None:
+    """Near the line's view at the start fraction, not on it: within 20 mm along each axis,
+    the optical axis within 10 degrees, the roll about it within 10 degrees; seeded."""
+    config = SimConfig(object="slanted", mode="explore", seed=seed)
+    obj = place_object(config)
+    start = worker_start_view(config, obj)
+    exact = views_along(obj, [0.2], distance_m=0.3, min_elevation_deg=35.0)[0]
+    offset = np.abs(start[:3, 3] - exact[:3, 3])
+    assert np.all(offset <= 0.02 + 1e-12) and np.max(offset) > 0.001
+    tilt = np.degrees(np.arccos(np.clip(start[:3, 2] @ exact[:3, 2], -1.0, 1.0)))
+    assert 0.0 < tilt <= 10.0 + 1e-9
+    assert np.degrees(rotation_angle(start[:3, :3], exact[:3, :3])) <= 10.0 * np.sqrt(2) + 1e-9
+    assert np.array_equal(start, worker_start_view(config, obj))
+    other = worker_start_view(replace(config, seed=seed + 10), obj)
+    assert not np.allclose(start, other)
+
+
+class IntoThePiece:
+    """A planner whose first view puts the camera inside the planar box (10 cm over the floor,
+    the box is 15 cm high): a cell that had not looked yet cannot know."""
+
+    def start(self) -> Decision:
+        inside = look_at((0.5, 0.0, 0.10), (0.5, 0.0, 0.0), up_hint=(-1.0, 0.0, 0.0))
+        return Decision(inside, "extrapolate")
+
+    def observe(self, frame: Frame) -> Decision:
+        return Decision(None, "done", stop=True)
+
+
+def test_a_crash_into_the_unseen_piece_is_counted_not_prevented(tmp_path: Path) -> None:
+    """Explore mode plans only with what the camera observed, so nothing stops the first move
+    into an unseen piece; the true mesh then counts the crash (view and move) and it is
+    reported. An oracle mode, planning with the true mesh, backs the camera out of it."""
+    config = SimConfig(object="planar_box", mode="explore", width=32, height=24)
+    blind = record(config, tmp_path / "blind.mcap", planner_factory=lambda c: IntoThePiece())
+    assert blind.views == 1 and blind.planned_with == "observed"
+    assert blind.collisions == 2 and blind.motion_collisions == 1  # at the view, on the way
+    assert blind.min_clearance_m < 0.0
+    assert blind.view_log[0]["collision"].endswith("/object")
+    with open_recording(tmp_path / "blind.mcap") as rec:
+        summary = rec.metadata["scrapcut_result"]
+    assert (summary["collisions"], summary["motion_collisions"]) == ("2", "1")
+    oracle = record(replace(config, mode="sweep"), tmp_path / "oracle.mcap", planner=IntoThePiece())
+    assert oracle.views == 1 and oracle.planned_with == "truth"
+    assert oracle.collisions == 0 and oracle.min_clearance_m > 0.0
+    assert oracle.view_log[0]["backoff_m"] >= 0.1  # backed out of the piece along the axis
 
 
 def test_explore_mode_without_a_planner_says_what_is_missing(tmp_path: Path) -> None:

@@ -6,6 +6,7 @@ from pathlib import Path
 from typing import Any
 
 import click
+import numpy as np
 
 from scrapcut_cli.commands._options import (
     build_config,
@@ -191,6 +192,18 @@ def record(
     _print_result(out, result)
 
 
+_PLANNED_WITH = {
+    "truth": "the true piece (oracle)",
+    "observed": "what the camera observed",
+}
+
+
+def _clearance_mm(clearance_m: float) -> str:
+    if not np.isfinite(clearance_m):
+        return "—"
+    return f"{1000.0 * clearance_m:.0f}" if clearance_m < 0.1 else "≥ 100"
+
+
 def _print_objects(console: Any, objects: list[tuple[str, str]]) -> None:
     from rich.table import Table
 
@@ -218,8 +231,9 @@ def _print_result(console: Any, result: Any) -> None:
         ("frames", str(result.frames)),
         ("infeasible views (skipped)", str(result.infeasible_views)),
         ("views adjusted (roll / back-off)", str(result.adjusted_views)),
-        ("collisions at views", str(result.collisions)),
-        ("moves through an obstacle", str(result.motion_collisions)),
+        ("collision checks saw", _PLANNED_WITH.get(result.planned_with, result.planned_with)),
+        ("crashes (true piece, floor)", f"{result.collisions} ({result.motion_collisions} moving)"),
+        ("closest approach to the piece (mm)", _clearance_mm(result.min_clearance_m)),
         ("camera travel (m)", f"{result.camera_travel_m:.2f}"),
         ("simulated time (s)", f"{result.duration_s:.1f}"),
         ("wall time (s)", f"{result.wall_time_s:.1f}"),

@@ -1,6 +1,7 @@
 """Algorithm 1: scan the painted line segment by segment, extrapolating the fitted curve.
 
-:class:`ExplorationPlanner` implements :class:`~scrapcut_cli.exploration.decision.ViewPlanner`.
+:class:`ExplorationPlanner` implements :class:`~scrapcut_cli.cell.ViewPlanner` (the planner
+contract with the robot cell).
 It is pure and deterministic — no pybullet, no files, no printing, no clock in its decisions —
 so the same frames and the same reachability answers give the same decisions, which is what
 ``scrapcut explore`` checks on a recording. Each :meth:`~ExplorationPlanner.observe`:
@@ -23,8 +24,9 @@ so the same frames and the same reachability answers give the same decisions, wh
    optical axis along the inverse surface normal there (observed surface, raised to
    ``min_elevation_deg``); the distance from ``min_distance_m`` upward and the roll about the
    axis searched until the camera and hand clear the occupancy map, the target and the known
-   tip are in sight and deep enough for the camera, and ``reachable(T)`` says yes. Only if the
-   normal gives no view are the last viewing direction, straight down and then the surface's
+   tip are in sight and deep enough for the camera, and the cell's ``reachable`` says yes (its
+   IK, limits and collision model of what its camera observed; never the true piece). Only if
+   the normal gives no view are the last viewing direction, straight down and then the surface's
    other side (``other_side_views``: a mesh or a sheet seen from behind) tried.
 
 Stopping: growth(k) <= ``delta_size`` ends a direction. Before declaring an endpoint there, the
@@ -53,18 +55,24 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from scrapcut_cli import __version__
+from scrapcut_cli.cell import (
+    Decision,
+    PlannerContext,
+    PlannerFactory,
+    Reachability,
+    ReachQuery,
+    ViewPlanner,
+)
 from scrapcut_cli.config import FitMethod, ScrapcutConfig, SkeletonConfig, choice_names
 from scrapcut_cli.errors import ExplorationError, FittingError, PerceptionError
-from scrapcut_cli.exploration.decision import Decision, Reachability, ViewPlanner
 from scrapcut_cli.exploration.evidence import DepthView, EndEvidence, depth_view, end_evidence
 from scrapcut_cli.exploration.occupancy import OccupancyMap, depth_points
 from scrapcut_cli.exploration.views import (
@@ -92,9 +100,6 @@ from scrapcut_cli.perception.paint import HsvRange
 from scrapcut_cli.perception.stitch import Stitcher
 from scrapcut_cli.recording.frame import Frame
 from scrapcut_cli.toolpath.normals import estimate_normals
-
-if TYPE_CHECKING:
-    from scrapcut_cli.sim.recorder import SimContext
 
 FloatArray = NDArray[np.float64]
 
@@ -327,9 +332,10 @@ class ExplorationPlanner:
     initial_view : (4, 4) float64
         ``T_base_cam`` of the first view, with the initial segment of the line in it (the
         worker's pointing). The camera returns here after the first endpoint.
-    reachable : callable
-        ``reachable(T_base_cam) -> bool``: can the robot place the camera there without
-        collision (the simulator's IK, or recorded answers in replay).
+    reachable : Reachability
+        ``reachable(ReachQuery) -> ReachAnswer`` (:mod:`scrapcut_cli.cell`): can the robot
+        place the camera exactly there, from where it is, without collision (the cell's IK and
+        collision model, or recorded answers in replay).
     hsv : HsvRange
         The paint's colour range.
     config : ScrapcutConfig
@@ -831,10 +837,12 @@ class ExplorationPlanner:
 
     def _ask(self, T: FloatArray) -> bool:
         t0 = time.perf_counter()
-        ok = bool(self._reachable(T))
+        answer = self._reachable(ReachQuery(T))
         self._reach_s += time.perf_counter() - t0
-        self._queries.append({**pose_to_dict(T), "ok": ok})
-        return ok
+        self._queries.append(
+            {**pose_to_dict(T), "ok": answer.feasible, "reason": answer.describe()}
+        )
+        return answer.feasible
 
     def _observed_surface(self) -> tuple[FloatArray, FloatArray]:
         """Stitched surface and paint points (N, 3) and their viewpoints (N, 3), base frame;
@@ -1035,20 +1043,19 @@ def planner_config_dict(config: ScrapcutConfig) -> dict[str, Any]:
     return {key: full[key] for key in ("exploration", "perception", "stitch", "nurbs", "skeleton")}
 
 
-def planner_factory(
-    config: ScrapcutConfig, *, hsv: HsvRange | None = None
-) -> Callable[[SimContext], ViewPlanner]:
-    """A factory the simulator calls with its context (start view, ``reachable``) in explore
-    mode. The paint defaults to the simulator's own (``context.config.paint``)."""
+def planner_factory(config: ScrapcutConfig, *, hsv: HsvRange | None = None) -> PlannerFactory:
+    """A factory a cell (the simulator's explore mode) calls with its
+    :class:`~scrapcut_cli.cell.PlannerContext`: the worker's start view, ``reachable``, the
+    paint. The paint's colour range defaults to the context's preset (``hsv`` overrides it)."""
 
-    def make(context: SimContext) -> ViewPlanner:
+    def make(context: PlannerContext) -> ViewPlanner:
         from scrapcut_cli.perception.paint import PAINT_PRESETS
 
         paint = hsv
         if paint is None:
-            preset = PAINT_PRESETS.get(context.config.paint)
+            preset = PAINT_PRESETS.get(context.paint)
             if preset is None:
-                raise PerceptionError(f"unknown paint preset {context.config.paint!r}")
+                raise PerceptionError(f"unknown paint preset {context.paint!r}")
             paint = preset.hsv
         return ExplorationPlanner(
             context.start_view, reachable=context.reachable, hsv=paint, config=config

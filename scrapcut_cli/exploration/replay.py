@@ -28,7 +28,7 @@ reference is read here. Nothing here prints; ``scrapcut explore`` renders the re
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -37,6 +37,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from scrapcut_cli import __version__
+from scrapcut_cli.cell import Reach, ReachAnswer, ReachQuery
 from scrapcut_cli.config import ScrapcutConfig, config_from_dict
 from scrapcut_cli.errors import ConfigError, ExplorationError
 from scrapcut_cli.exploration.planner import (
@@ -261,18 +262,21 @@ class RecordedAnswers:
         self._k = k
         self._queue = list(queries)
 
-    def __call__(self, T_base_cam: NDArray[np.float64]) -> bool:
+    def __call__(self, query: ReachQuery) -> ReachAnswer:
         if not self._queue:
             self.divergences.append(f"step {self._k}: a reachability query the log does not have")
-            return False
+            return ReachAnswer(False, Reach.NO_RECORD, "not in the log")
         logged = self._queue.pop(0)
         T = pose_from_dict(logged)
-        if not _same_pose(T, np.asarray(T_base_cam, dtype=np.float64)):
+        if not _same_pose(T, np.asarray(query.T_base_cam, dtype=np.float64)):
             self.divergences.append(
-                f"step {self._k}: reachability asked at {_pose_text(T_base_cam)}, "
+                f"step {self._k}: reachability asked at {_pose_text(query.T_base_cam)}, "
                 f"log has {_pose_text(T)}"
             )
-        return bool(logged.get("ok", False))
+        ok = bool(logged.get("ok", False))
+        # Logs before the cell contract kept no reason.
+        reason, detail = Reach.parse(str(logged.get("reason", "ok" if ok else "no_record")))
+        return ReachAnswer(ok, reason, detail, T_base_cam=T if ok else None)
 
     def finish(self) -> None:
         if self._queue:
@@ -327,8 +331,11 @@ class NearestView:
         cost = np.where(ok, distance + self.angle_weight_m * angle, np.inf)
         return int(np.argmin(cost))  # lowest index wins ties: deterministic
 
-    def __call__(self, T_base_cam: NDArray[np.float64]) -> bool:
-        return self.nearest(T_base_cam) is not None
+    def __call__(self, query: ReachQuery) -> ReachAnswer:
+        k = self.nearest(query.T_base_cam)
+        if k is None:
+            return ReachAnswer(False, Reach.NO_RECORD, "no recorded frame near the pose")
+        return ReachAnswer(True, Reach.OK, T_base_cam=np.asarray(query.T_base_cam).copy())
 
 
 # --------------------------------------------------------------------------- replay
@@ -492,7 +499,7 @@ def _with_logged_pose(frame: Frame, entry: dict[str, Any]) -> Frame:
     return replace(frame, T_base_cam=T)
 
 
-def _compare(logged: dict[str, Any], replayed: dict[str, Any], frame: Frame) -> list[str]:
+def _compare(logged: Mapping[str, Any], replayed: Mapping[str, Any], frame: Frame) -> list[str]:
     """Differences between a logged decision and the replayed one (empty when equal)."""
     k = logged.get("k")
     out = []
@@ -519,7 +526,7 @@ def _compare(logged: dict[str, Any], replayed: dict[str, Any], frame: Frame) -> 
     return out
 
 
-def _evidence_verdicts(entry: dict[str, Any]) -> list[tuple[Any, ...]]:
+def _evidence_verdicts(entry: Mapping[str, Any]) -> list[tuple[Any, ...]]:
     """(direction, observed, frame, how) of each end-evidence check of a log entry."""
     return [
         (e.get("direction"), e.get("observed"), e.get("frame"), e.get("how"))
@@ -636,7 +643,7 @@ def what_if(
 
 
 def _step(
-    info: dict[str, Any],
+    info: Mapping[str, Any],
     frame: Frame | Observation,
     requested: FloatArray | None,
     planned: FloatArray | None,

@@ -1,14 +1,24 @@
 """The recorder: drive the Panda through a planner's views, render, and write an MCAP.
 
-One loop serves every mode (exploration.decision's contract)::
+One loop serves every mode (the planner contract of :mod:`scrapcut_cli.cell`)::
 
     decision = planner.start()
     while not decision.stop:
-        execute decision.T_base_cam (IK, free DOFs, collisions)  -> or skip it
-        move there (joint-space minimum-jerk motion, through the ready pose if the straight
-            move would hit the piece; /tf and /joint_states at tf_rate_hz)
+        execute decision.T_base_cam (IK, free DOFs, collisions at the view and on the way:
+            the straight joint-space move, or a detour through the ready pose)  -> or skip it
+        move there (minimum-jerk motion; /tf and /joint_states at tf_rate_hz)
         rest, capture frames_per_view images, write them
         decision = planner.observe(frame)   # the view's last image, exactly as a reader reads it
+
+What the loop plans with depends on the mode. ``sweep`` and ``survey`` are oracles by design:
+their views follow the true line and they plan against the TRUE mesh of the piece. ``explore``
+plans only with what a real cell knows: inverse kinematics within the joint limits,
+self-collision, the floor, and the voxels its camera has observed so far
+(``sim.observed``, filled from each captured frame as a reader returns it). Its first view is
+where a worker points the robot: a view of the line at the start fraction, moved by up to
+20 mm and turned by up to 10° (seeded). In every mode the true mesh is used afterwards to
+count crashes: contacts of the robot or camera with the true piece or the floor at each
+executed view and along each move (``RecordResult.collisions``), and the closest approach.
 
 What is written (DESIGN.md, realsense-ros 4.x names)
 ----------------------------------------------------
@@ -43,15 +53,23 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol, runtime_checkable
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from scrapcut_cli import __version__
+from scrapcut_cli.cell import (
+    Decision,
+    PlannerContext,
+    PlannerFactory,
+    ReachAnswer,
+    ReachQuery,
+    SkippingPlanner,
+    ViewPlanner,
+)
 from scrapcut_cli.config import ScanMode, SimConfig, choice_names
 from scrapcut_cli.errors import SimError
-from scrapcut_cli.exploration.decision import Decision, Reachability, ViewPlanner
 from scrapcut_cli.geometry import matrix_to_quat_xyzw
 from scrapcut_cli.recording.frame import CameraModel, Frame
 from scrapcut_cli.sim.camera import (
@@ -72,12 +90,14 @@ from scrapcut_cli.sim.camera import (
     simulate_depth,
 )
 from scrapcut_cli.sim.objects import ScrapObject, make_object
+from scrapcut_cli.sim.observed import ObservedScene
 from scrapcut_cli.sim.robot import (
     FINGER_OPENING_M,
     LINK_NAMES,
     Q_READY,
     PandaSim,
     RobotLimits,
+    World,
     joint_names,
 )
 from scrapcut_cli.sim.surface import OVERSPRAY_PRESETS, PaintStroke
@@ -111,6 +131,7 @@ MIN_JERK_PEAK = 1.875
 
 # Independent random streams: numpy Generators seeded by (seed, stream, index...).
 _STREAM_HAND_EYE, _STREAM_LATENCY, _STREAM_LIGHT, _STREAM_SENSOR, _STREAM_STAMP = range(5)
+_STREAM_START = 5
 
 
 @dataclass(frozen=True)
@@ -119,12 +140,14 @@ class RecordResult:
 
     ``views`` executed views, ``frames`` colour/depth pairs written, ``infeasible_views``
     views the robot could not reach even with the free DOFs (skipped), ``adjusted_views``
-    views that needed a roll or back-off, ``collisions`` executed views whose true robot and
-    camera pose touched the piece or floor (0 by construction; recounted as a check),
-    ``motion_collisions`` moves between views that pass through an obstacle (the straight
-    joint-space move and the detour through the ready pose both blocked),
-    ``camera_travel_m`` length of the camera's path, ``duration_s`` simulated time,
-    ``wall_time_s`` real time.
+    views that needed a roll or back-off, ``collisions`` crashes: executed views and moves in
+    which the robot or the camera (where it really is) touched the TRUE piece, the floor or
+    itself (counted with the true mesh after planning without it in explore mode; must be 0),
+    ``motion_collisions`` the crashes that happened during moves, ``min_clearance_m`` the
+    closest the robot and camera came to the true piece (at most 0.1 m; negative: into it),
+    ``planned_with`` what collision checks saw (``truth``: the piece's mesh, the oracle modes;
+    ``observed``: the camera's voxels, explore), ``camera_travel_m`` length of the camera's
+    path, ``duration_s`` simulated time, ``wall_time_s`` real time.
     """
 
     path: Path
@@ -138,38 +161,13 @@ class RecordResult:
     adjusted_views: int
     collisions: int
     motion_collisions: int
+    min_clearance_m: float
+    planned_with: str
     camera_travel_m: float
     duration_s: float
     wall_time_s: float
     stop_reason: str
     view_log: tuple[dict[str, Any], ...] = ()
-
-
-@dataclass(frozen=True, eq=False)
-class SimContext:
-    """What a closed-loop planner may use from the simulator (explore mode).
-
-    ``start_view`` is the worker's initial segment: a view of the painted line at
-    ``SimConfig.start_fraction`` of its length (default: the piece's own, usually the middle).
-    ``reachable(T_base_cam)`` answers with IK, joint limits and collisions against the true
-    piece and floor, from the robot's current joints.
-    """
-
-    config: SimConfig
-    camera: CameraModel
-    reachable: Reachability
-    start_view: FloatArray
-    object_name: str
-
-
-PlannerFactory = Callable[[SimContext], ViewPlanner]
-
-
-@runtime_checkable
-class SkippingPlanner(Protocol):
-    """A planner that can be told its last view was infeasible (pre-planned sweeps do)."""
-
-    def skip(self, reason: str) -> Decision: ...
 
 
 def validate(config: SimConfig) -> None:
@@ -263,15 +261,17 @@ def record(
     """Simulate a scan of ``config.object`` and write it to ``out_path`` (MCAP, atomically).
 
     ``sweep`` and ``survey`` plan their views themselves; ``explore`` needs a closed-loop
-    planner: ``planner``, or ``planner_factory(context)`` when it needs the simulator's
-    ``reachable`` callback. A planner given in another mode drives the loop instead of the
-    mode's own views. ``progress(done, total)`` is called after every decided view.
+    planner: ``planner``, or ``planner_factory(context)`` (:class:`~scrapcut_cli.cell.
+    PlannerContext`: the camera, the worker's start view, the cell's ``reachable``, the
+    paint). A planner given in another mode drives the loop instead of the mode's own views.
+    In explore mode every collision check of the loop sees only what the camera observed; the
+    true piece only counts crashes. ``progress(done, total)`` is called after every decided
+    view.
     """
     from scrapcut_cli.perception.paint import PAINT_PRESETS
     from scrapcut_cli.recording.writer import McapWriter
-    from scrapcut_cli.sim.objects import explore_start_fraction
     from scrapcut_cli.sim.render import SceneRenderer
-    from scrapcut_cli.sim.views import PrePlannedPlanner, views_along
+    from scrapcut_cli.sim.views import PrePlannedPlanner
 
     wall_start = time.perf_counter()
     validate(config)
@@ -295,6 +295,7 @@ def record(
     )
     renderer = SceneRenderer(obj, stroke, seed=config.seed)
     limits = RobotLimits(max_backoff_m=config.max_backoff_m)
+    observed = ObservedScene() if config.mode == "explore" else None
 
     with (
         PandaSim(
@@ -305,35 +306,32 @@ def record(
         ) as robot,
         McapWriter(out_path) as writer,
     ):
-        session = _Session(writer, robot, renderer, camera, preset, config)
+        session = _Session(writer, robot, renderer, camera, preset, config, observed=observed)
+        params = _params(config, preset, camera, T_hand_camlink_true, limits, stroke)
         active: ViewPlanner
         if planner is not None:
             active = planner
         elif planner_factory is None:
             views = planned_views(
-                config, obj, reachable=lambda T: robot.plan_view(T, Q_READY).feasible
+                config,
+                obj,
+                reachable=lambda T: robot.plan_view(T, Q_READY, check_motion=False).feasible,
             )
             active = PrePlannedPlanner(views, reason=config.mode)
         else:
-            fraction = config.start_fraction
-            if fraction is None:
-                fraction = explore_start_fraction(obj.name)
-            start_view = views_along(
-                obj,
-                [fraction],
-                distance_m=config.view_distance_m,
-                min_elevation_deg=config.min_elevation_deg,
-            )[0]
-            context = SimContext(
-                config=config,
+            start_view = worker_start_view(config, obj)
+            context = PlannerContext(
                 camera=camera,
-                reachable=lambda T: robot.reachable(T, session.q),
                 start_view=start_view,
-                object_name=obj.name,
+                reachable=session.reachable,
+                paint=config.paint,
+                base_frame=BASE_FRAME,
             )
             active = planner_factory(context)
+            params["start_view"] = start_view.tolist()
+        if observed is not None:
+            params["observed"] = dataclasses.asdict(observed.settings)
         total = int(getattr(active, "total", config.max_views))
-        params = _params(config, preset, camera, T_hand_camlink_true, limits, stroke)
         writer.add_metadata("scrapcut", _metadata(config, params))
         session.start(obj.reference)
         stop_reason = session.run(active, total, progress)
@@ -350,6 +348,8 @@ def record(
             adjusted_views=session.adjusted,
             collisions=session.collisions,
             motion_collisions=session.motion_collisions,
+            min_clearance_m=session.min_clearance_m,
+            planned_with=session.world.value,
             camera_travel_m=session.travel_m,
             duration_s=(session.t_ns - START_NS) / 1e9,
             wall_time_s=0.0,
@@ -360,11 +360,34 @@ def record(
     return dataclasses.replace(result, wall_time_s=time.perf_counter() - wall_start)
 
 
+def worker_start_view(config: SimConfig, obj: ScrapObject) -> FloatArray:
+    """``T_base_cam`` (4, 4) where a worker points the robot to start exploring: the sweep's
+    view of the line at ``config.start_fraction`` (default: the piece's own), moved and turned
+    as a hand would (``sim.views.worker_view``, seeded by ``config.seed``)."""
+    from scrapcut_cli.sim.objects import explore_start_fraction
+    from scrapcut_cli.sim.views import views_along, worker_view
+
+    fraction = config.start_fraction
+    if fraction is None:
+        fraction = explore_start_fraction(obj.name)
+    exact = views_along(
+        obj,
+        [fraction],
+        distance_m=config.view_distance_m,
+        min_elevation_deg=config.min_elevation_deg,
+    )[0]
+    return worker_view(exact, _rng(config.seed, _STREAM_START))
+
+
 # --------------------------------------------------------------------------- the session
 
 
 class _Session:
-    """Simulated clock, robot state and the log-time-ordered message queue of one recording."""
+    """Simulated clock, robot state and the log-time-ordered message queue of one recording.
+
+    ``observed``: the cell's obstacle model in explore mode (collision checks see it, never
+    the true piece); None: the oracle modes plan against the true mesh.
+    """
 
     def __init__(
         self,
@@ -374,6 +397,8 @@ class _Session:
         camera: CameraModel,
         preset: NoisePreset,
         config: SimConfig,
+        *,
+        observed: ObservedScene | None = None,
     ) -> None:
         self.writer = writer
         self.robot = robot
@@ -381,6 +406,8 @@ class _Session:
         self.camera = camera
         self.preset = preset
         self.config = config
+        self.observed = observed
+        self.world = World.TRUTH if observed is None else World.OBSERVED
         self.q = np.asarray(Q_READY, dtype=np.float64)
         self.t_ns = START_NS
         self.dt_ns = round(1e9 / config.tf_rate_hz)
@@ -390,6 +417,7 @@ class _Session:
         self._latency = _rng(config.seed, _STREAM_LATENCY)
         self.views = self.frames = self.infeasible = self.adjusted = 0
         self.collisions = self.motion_collisions = 0
+        self.min_clearance_m = np.inf
         self.travel_m = 0.0
         self.log: list[dict[str, Any]] = []
         self._names = list(joint_names())
@@ -486,8 +514,10 @@ class _Session:
         self.t_ns = end
         self._flush(self.t_ns)
 
-    def _move(self, q_target: FloatArray) -> None:
-        """Minimum-jerk joint motion to ``q_target`` at the configured share of joint speeds."""
+    def _move(self, q_target: FloatArray) -> str | None:
+        """Minimum-jerk joint motion to ``q_target`` at the configured share of joint speeds;
+        returns what the robot touched on the way (the true piece, floor or itself), if
+        anything."""
         q0 = self.q
         delta = q_target - q0
         vmax = self.config.speed_scale * self.robot.kin.velocity
@@ -506,8 +536,24 @@ class _Session:
         self.q = np.asarray(q_target, dtype=np.float64)
         self.t_ns = end
         self._flush(self.t_ns)
+        return self._count_motion(q0, self.q)
+
+    def _count_motion(self, q_from: FloatArray, q_to: FloatArray) -> str | None:
+        """Check a move (a straight joint-space path) against the TRUE piece: count a crash,
+        keep the closest approach; returns what was hit, if anything."""
+        hit, clearance = self.robot.motion_crash(q_from, q_to)
+        self.min_clearance_m = min(self.min_clearance_m, clearance)
+        if hit is not None:
+            self.collisions += 1
+            self.motion_collisions += 1
+        return hit
 
     # ------------------------------------------------------------------ views
+
+    def reachable(self, query: ReachQuery) -> ReachAnswer:
+        """The cell's answer to a planner's query, from the current joints: IK, limits, and
+        collisions in the world this session plans with (explore: what was observed)."""
+        return self.robot.reachable(query, self.q, world=self.world)
 
     def run(
         self, planner: ViewPlanner, total: int, progress: Callable[[int, int], None] | None
@@ -522,69 +568,61 @@ class _Session:
             if decision.T_base_cam is None:
                 raise SimError(f"the planner gave no camera pose for {decision.reason!r}")
             decided += 1
-            solution = self.robot.plan_view(decision.T_base_cam, self.q)
-            entry: dict[str, Any] = {
-                "decision": decision.reason,
-                "feasible": solution.feasible,
-                "reason": solution.reason,
-                "attempts": solution.attempts,
-            }
-            if not solution.feasible:
-                self.infeasible += 1
-                self.log.append(entry)
-                if progress is not None:
-                    progress(decided, max(total, decided))
+            frame = self._execute(decision)
+            if progress is not None:
+                progress(decided, max(total, decided))
+            if frame is None:
+                why = self.log[-1]["reason"]
                 if isinstance(planner, SkippingPlanner):
-                    decision = planner.skip(solution.reason)
+                    decision = planner.skip(why)
                     continue
-                return f"infeasible view ({solution.reason})"
-            assert solution.q is not None
-            if solution.roll_rad != 0.0 or solution.backoff_m > 0.0:
-                self.adjusted += 1
-            route, blocked = self._route(solution.q)
-            if blocked is not None:
-                self.motion_collisions += 1
-            for q in route:
-                self._move(q)
-            # Recheck the executed pose with the TRUE hand-eye (the housing sits there).
-            touching = self.robot.collision(solution.q)
-            if touching is not None:
-                self.collisions += 1
-            frame = self._capture()
-            entry.update(
-                view=self.views - 1,
-                stamp_ns=frame.stamp_ns,
-                roll_deg=round(float(np.degrees(solution.roll_rad)), 3),
-                backoff_m=solution.backoff_m,
-                collision=touching,
-                motion_collision=blocked,
-                detour=len(route) > 1,
-            )
-            self.log.append(entry)
+                return f"infeasible view ({why})"
             decision = planner.observe(frame)
             if explore:
                 self._log_decision(decision, len(self.log))
-            if progress is not None:
-                progress(decided, max(total, decided))
         return decision.reason
 
-    def _route(self, q_target: FloatArray) -> tuple[list[FloatArray], str | None]:
-        """Joint waypoints to ``q_target`` and the collision left on the way (None if clear).
+    def _execute(self, decision: Decision) -> Frame | None:
+        """Move to the decided view (free DOFs, detour) and capture it; None if infeasible.
 
-        The straight joint-space move, or, when it would sweep the arm through the piece (a
-        jump to the line's other end over a ridge), a detour through the ready pose above it:
-        no motion planner, but the two moves an operator would teach.
+        Planned in this session's world; then the view and the moves are checked against the
+        true piece, and crashes counted. Logs the view (``log``).
         """
-        blocked = self.robot.path_collision(self.q, q_target)
-        if blocked is None:
-            return [q_target], None
-        ready = np.asarray(Q_READY, dtype=np.float64)
-        clear = (
-            self.robot.collision(ready) is None
-            and self.robot.path_collision(self.q, ready) is None
-            and self.robot.path_collision(ready, q_target) is None
+        assert decision.T_base_cam is not None
+        solution = self.robot.plan_view(decision.T_base_cam, self.q, world=self.world)
+        answer = solution.answer
+        entry: dict[str, Any] = {
+            "decision": decision.reason,
+            "feasible": answer.feasible,
+            "reason": answer.describe(),
+            "attempts": answer.attempts,
+        }
+        self.log.append(entry)
+        if not answer.feasible:
+            self.infeasible += 1
+            return None
+        assert solution.q is not None
+        if answer.roll_rad != 0.0 or answer.backoff_m > 0.0:
+            self.adjusted += 1
+        hits = [self._move(q) for q in solution.route]
+        touching = self.robot.crash(self.q)
+        self.min_clearance_m = min(self.min_clearance_m, self.robot.clearance(self.q))
+        if touching is not None:
+            self.collisions += 1
+        frame = self._capture()
+        if self.observed is not None:
+            self.observed.add(frame)
+            self.robot.set_observed(*self.observed.mesh())
+        entry.update(
+            view=self.views - 1,
+            stamp_ns=frame.stamp_ns,
+            roll_deg=round(float(np.degrees(answer.roll_rad)), 3),
+            backoff_m=answer.backoff_m,
+            collision=touching,
+            motion_collision=next((h for h in hits if h is not None), None),
+            detour=len(solution.route) > 1,
         )
-        return ([ready, q_target], None) if clear else ([q_target], blocked)
+        return frame
 
     def _capture(self) -> Frame:
         """Rest at the current joints, render the view and write ``frames_per_view`` images."""
@@ -614,7 +652,8 @@ class _Session:
                 depth=depth_read,
                 camera=self.camera,
                 T_base_cam=T_nominal.copy(),
-                extras={"view": view, "T_base_cam_true": T_true},
+                # What a reader returns: nothing of the simulator's truth (the true pose).
+                extras={"depth_stamp_ns": stamp},
             )
         self._rest(rest)
         assert frame is not None

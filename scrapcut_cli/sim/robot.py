@@ -2,30 +2,39 @@
 
 The arm is ``franka_panda/panda.urdf`` from ``pybullet_data`` with a fixed base at the origin
 of ``panda_link0``. pybullet (DIRECT mode, no GUI) answers inverse kinematics and collision
-queries against the TRUE piece mesh and the floor; forward kinematics for /tf is evaluated in
-numpy from the same URDF by :class:`scrapcut_cli.motion.panda.PandaKinematics` (vectorised over
-hundreds of samples per motion, where pybullet would need a call per sample), and a test checks
-both agree.
+queries; forward kinematics for /tf is evaluated in numpy from the same URDF by
+:class:`scrapcut_cli.motion.panda.PandaKinematics` (vectorised over hundreds of samples per
+motion, where pybullet would need a call per sample), and a test checks both agree.
+
+Collisions are checked against one of two worlds (:class:`World`): the TRUE piece mesh, which
+the oracle modes (sweep, survey) plan with and against which crashes are counted, or what the
+camera has OBSERVED (``sim.observed``), all a real cell knows and all explore mode plans with.
+Both include the floor, the camera housing and self-collision of the arm (the link pairs that
+can touch within the joint limits, :data:`SELF_COLLISION_PAIRS`).
 
 A requested camera pose is executed as the paper's Section IV-B describes: the optical axis is
 kept, the rotation about it and the distance to the surface are the free degrees of freedom.
 :meth:`PandaSim.plan_view` tries rotations about the optical axis (0, ±30°, ... 180°) at the
 requested distance, then — if some of those were blocked by a collision — backs the camera off
 along its axis in 25 mm steps, until inverse kinematics converges inside the joint limits with
-no collision, or gives up with the reason of the last failure (backing off cannot cure a pose
-out of reach or beyond the joint limits, so those give up at once).
+no collision at the view nor on the way there (the straight joint-space move, or a detour
+through the ready pose), or gives up with the reason of the last failure (backing off cannot
+cure a pose out of reach or beyond the joint limits, so those give up at once). Its answer is
+the planner contract's (``cell.ReachAnswer``).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from enum import Enum
 from types import TracebackType
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from scrapcut_cli.cell import Reach, ReachAnswer, ReachQuery
 from scrapcut_cli.errors import SimError
 from scrapcut_cli.geometry import (
     invert_transform,
@@ -60,26 +69,64 @@ FINGER_OPENING_M = 0.02
 _FLANGE_LINK = 7
 _NO_FLOOR_CHECK = (-1, 0)  # panda_link0 stands on the floor; link1 is the column above it
 _HOUSING_VS_ARM = (-1, 0, 1, 2, 3, 4)  # the camera may hit the arm up to panda_link5
+#: Link pairs checked for self-collision: those that touched in at least one of 20 000 random
+#: configurations within the joint limits (MoveIt Setup Assistant's sampling; seed 0). The
+#: other non-adjacent pairs never did: the shoulder against the upper arm, the forearm links
+#: against the hand.
+SELF_COLLISION_PAIRS = tuple(
+    [
+        (base, tip)
+        for base in ("panda_link0", "panda_link1", "panda_link2")
+        for tip in (
+            "panda_link5",
+            "panda_link6",
+            "panda_link7",
+            "panda_hand",
+            "panda_leftfinger",
+            "panda_rightfinger",
+        )
+    ]
+    + [
+        ("panda_link5", tip)
+        for tip in ("panda_link7", "panda_hand", "panda_leftfinger", "panda_rightfinger")
+    ]
+)
+#: Joint-space step of the collision checks along a planned move (the largest joint's motion,
+#: radians), about what MoveIt's default segment check uses; the margins cover the gaps.
+PLAN_STEP_RAD = 0.05
+#: A finer step for counting crashes against the true piece, with no margin (a link 0.8 m from
+#: the joint moves 8 mm between two samples).
+CRASH_STEP_RAD = 0.01
+
+
+class World(Enum):
+    """What a collision check sees besides the robot itself and the floor."""
+
+    #: The piece's true mesh: the oracle modes (sweep, survey) plan with it, and crashes are
+    #: counted against it.
+    TRUTH = "truth"
+    #: The voxels the camera has observed so far (``sim.observed``): what a real cell knows,
+    #: and all that explore mode plans with.
+    OBSERVED = "observed"
 
 
 @dataclass(frozen=True, eq=False)
 class ViewSolution:
-    """How (or whether) a requested camera pose can be executed.
+    """How (or whether) a requested camera pose can be executed from the current joints.
 
-    ``T_base_cam`` is the pose the robot reaches as the controller sees it (nominal hand-eye);
-    ``q`` the joint angles (7,); ``roll_rad`` and ``backoff_m`` the free-DOF adjustment used;
-    ``reason`` is ``ok`` or why the last attempt failed (``ik``, ``joint_limits``,
-    ``collision:<link>/<obstacle>``).
+    ``answer`` is the contract's answer (pose reached as the controller sees it, with the
+    nominal hand-eye; free-DOF adjustment; reason); ``q`` the joint angles (7,) at the view;
+    ``route`` the joint waypoints to move through, ending at ``q``: the straight joint-space
+    move, or a detour through the ready pose when the straight one would hit an obstacle.
     """
 
-    feasible: bool
-    T_base_cam_requested: FloatArray
-    T_base_cam: FloatArray | None
-    q: FloatArray | None
-    roll_rad: float
-    backoff_m: float
-    attempts: int
-    reason: str
+    answer: ReachAnswer
+    q: FloatArray | None = None
+    route: tuple[FloatArray, ...] = ()
+
+    @property
+    def feasible(self) -> bool:
+        return self.answer.feasible
 
 
 @dataclass(frozen=True)
@@ -118,6 +165,13 @@ class RobotLimits:
 class PandaSim:
     """The Panda, the piece and the floor in a pybullet DIRECT world (close it, or use ``with``).
 
+    Collision checks take a :class:`World`: ``TRUTH`` (the piece's true mesh; the oracle modes
+    plan with it) or ``OBSERVED`` (the voxels given to :meth:`set_observed`; the camera's
+    view of the piece, all a real cell plans with). Both include the floor, self-collision and
+    the camera housing, with :class:`RobotLimits`' margins. :meth:`crash` and
+    :meth:`motion_crash` check the TRUE piece and floor with no margin, the housing where the
+    camera really is: they count failures, they never plan.
+
     Parameters
     ----------
     obstacle : TriMesh
@@ -125,8 +179,8 @@ class PandaSim:
     T_hand_camlink_nominal : (4, 4)
         The calibrated hand-eye transform the controller uses (and /tf_static publishes).
     T_hand_camlink_true : (4, 4), optional
-        Where the camera really is (``yard``: perturbed); default the nominal one. Collisions
-        of the camera housing use it.
+        Where the camera really is (``yard``: perturbed); default the nominal one. The housing
+        is placed there for ``TRUTH`` checks and crashes, at the nominal one for ``OBSERVED``.
     limits : RobotLimits
         Margins and solver settings.
     """
@@ -151,6 +205,12 @@ class PandaSim:
         self._T_cam_link8 = invert_transform(self._T_link8_cam)
         self._T_link8_camlink_true = self.kin.T_link8_hand @ self.T_hand_camlink_true
         self._T_link8_cam_true = self._T_link8_camlink_true @ T_CAMLINK_OPTICAL
+        T_camlink_housing = make_transform(np.eye(3), HOUSING_CENTRE_CAMLINK)
+        # The housing's pose relative to the flange, as (position, xyzw) for pybullet.
+        self._link8_housing = {
+            True: _pose_pair(self._T_link8_camlink_true @ T_camlink_housing),
+            False: _pose_pair(self.kin.T_link8_hand @ self.T_hand_camlink @ T_camlink_housing),
+        }
 
         p = pybullet()
         from pybullet_utils.bullet_client import BulletClient  # type: ignore[import-untyped]
@@ -164,27 +224,20 @@ class PandaSim:
         self._p = p
         self._arm = [self._joint_index(n) for n in ARM_JOINTS]
         self._fingers = [self._joint_index(n) for n in FINGER_JOINTS]
-        self._movable = [
-            j for j in range(c.getNumJoints(self._robot)) if c.getJointInfo(self._robot, j)[2] != 4
-        ]
+        self._joints = [*self._arm, *self._fingers]
         self._link_names = {-1: "panda_link0"}
         for j in range(c.getNumJoints(self._robot)):
             self._link_names[j] = c.getJointInfo(self._robot, j)[12].decode()
+        index = {name: j for j, name in self._link_names.items()}
+        self._self_pairs = [(index[a], index[b]) for a, b in SELF_COLLISION_PAIRS]
         floor_shape = c.createCollisionShape(p.GEOM_PLANE)
         self._floor = c.createMultiBody(baseMass=0, baseCollisionShapeIndex=floor_shape)
-        vertices, faces = _weld(obstacle)
-        mesh_shape = c.createCollisionShape(
-            p.GEOM_MESH,
-            vertices=vertices.tolist(),
-            indices=faces.reshape(-1).tolist(),
-            flags=p.GEOM_FORCE_CONCAVE_TRIMESH,
-        )
-        if mesh_shape < 0:
+        self._object = self._mesh_body(*_weld(obstacle))
+        if self._object is None:
             raise SimError("pybullet could not build the piece's collision mesh")
-        self._object = c.createMultiBody(baseMass=0, baseCollisionShapeIndex=mesh_shape)
+        self._observed: int | None = None
         housing_shape = c.createCollisionShape(p.GEOM_BOX, halfExtents=list(HOUSING_HALF_EXTENTS))
         self._housing = c.createMultiBody(baseMass=0, baseCollisionShapeIndex=housing_shape)
-        self._T_camlink_housing = make_transform(np.eye(3), HOUSING_CENTRE_CAMLINK)
         lower = [*self.kin.lower, 0.0, 0.0]
         upper = [*self.kin.upper, 0.04, 0.04]
         self._ik_limits = {
@@ -221,6 +274,33 @@ class PandaSim:
                 return j
         raise SimError(f"panda.urdf in pybullet has no joint {name}")
 
+    def _mesh_body(self, vertices: FloatArray, faces: NDArray[np.int64]) -> int | None:
+        """A static concave triangle-mesh body (None if pybullet refuses the mesh)."""
+        c, p = self._client, self._p
+        shape = c.createCollisionShape(
+            p.GEOM_MESH,
+            vertices=vertices.tolist(),
+            indices=faces.reshape(-1).tolist(),
+            flags=p.GEOM_FORCE_CONCAVE_TRIMESH,
+        )
+        if shape < 0:
+            return None
+        return int(c.createMultiBody(baseMass=0, baseCollisionShapeIndex=shape))
+
+    def set_observed(self, vertices: ArrayLike, faces: ArrayLike) -> None:
+        """Replace the observed obstacles (``World.OBSERVED``) by a triangle mesh: vertices
+        (V, 3) metres, base frame, triangles (F, 3) (``ObservedScene.mesh``). Empty: none."""
+        if self._observed is not None:
+            self._client.removeBody(self._observed)
+            self._observed = None
+        V = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+        F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+        if len(F) == 0:
+            return
+        self._observed = self._mesh_body(V, F)
+        if self._observed is None:
+            raise SimError("pybullet could not build the observed obstacles' collision mesh")
+
     # ------------------------------------------------------------------ kinematics
 
     def camera_pose(self, q: ArrayLike, *, true: bool = False) -> FloatArray:
@@ -233,20 +313,22 @@ class PandaSim:
         T = self.kin.flange(np.atleast_2d(np.asarray(q, dtype=np.float64)))
         return np.asarray(T @ (self._T_link8_cam_true if true else self._T_link8_cam))
 
-    def set_joints(self, q: ArrayLike) -> None:
-        """Place the arm at joints (7,) (fingers at their fixed opening) and the housing."""
+    def set_joints(self, q: ArrayLike, *, true_camera: bool = True) -> None:
+        """Place the arm at joints (7,) (fingers at their fixed opening) and the camera housing
+        on the hand where it really is (``true_camera``) or where the calibration says."""
         c = self._client
-        for j, v in zip(self._arm, np.asarray(q, dtype=np.float64), strict=True):
-            c.resetJointState(self._robot, j, float(v))
-        for j in self._fingers:
-            c.resetJointState(self._robot, j, FINGER_OPENING_M)
-        T = self.kin.flange(q) @ self._T_link8_camlink_true @ self._T_camlink_housing
-        c.resetBasePositionAndOrientation(
-            self._housing, T[:3, 3].tolist(), matrix_to_quat_xyzw(T[:3, :3]).tolist()
+        values = [[float(v)] for v in np.asarray(q, dtype=np.float64)]
+        c.resetJointStatesMultiDof(
+            self._robot, self._joints, [*values, [FINGER_OPENING_M], [FINGER_OPENING_M]]
         )
+        state = c.getLinkState(self._robot, _FLANGE_LINK, computeForwardKinematics=True)
+        position, orientation = c.multiplyTransforms(
+            state[4], state[5], *self._link8_housing[true_camera]
+        )
+        c.resetBasePositionAndOrientation(self._housing, position, orientation)
 
-    def solve_ik(self, T_base_cam: ArrayLike, q_seed: ArrayLike) -> tuple[FloatArray | None, str]:
-        """Joints (7,) placing the camera at ``T_base_cam``, or (None, reason).
+    def solve_ik(self, T_base_cam: ArrayLike, q_seed: ArrayLike) -> tuple[FloatArray | None, Reach]:
+        """Joints (7,) placing the camera at ``T_base_cam`` (and ``Reach.OK``), or (None, why).
 
         pybullet's damped-least-squares IK with the joint limits in its null space, restarted
         from its own answer until the flange pose is within tolerance; then from Q_READY if the
@@ -256,7 +338,7 @@ class PandaSim:
         position = target[:3, 3].tolist()
         orientation = matrix_to_quat_xyzw(target[:3, :3]).tolist()
         lim = self.limits
-        reason = "ik"
+        reason = Reach.IK
         for seed in (np.asarray(q_seed, dtype=np.float64), np.asarray(Q_READY)):
             q = seed.copy()
             previous = np.inf
@@ -290,61 +372,163 @@ class PandaSim:
             if not converged:
                 continue
             if self.kin.within_limits(q, lim.joint_margin_rad):
-                return q, "ok"
-            reason = "joint_limits"
+                return q, Reach.OK
+            reason = Reach.JOINT_LIMITS
         return None, reason
 
     # ------------------------------------------------------------------ collisions
 
-    def collision(self, q: ArrayLike) -> str | None:
-        """The first colliding pair at joints (7,), as ``link/obstacle``, or None if clear."""
+    def collision(self, q: ArrayLike, *, world: World = World.TRUTH) -> str | None:
+        """The first colliding pair at joints (7,), as ``link/obstacle``, or None if clear.
+
+        With the limits' margins: the piece (``TRUTH``: ``object``) or what was observed
+        (``OBSERVED``: ``observed``), the floor, the camera housing against both and the arm,
+        and the arm against itself.
+        """
+        truth = world is World.TRUTH
+        obstacle = self._object if truth else self._observed
+        lim = self.limits
+        return self._contact(
+            q,
+            obstacle=obstacle,
+            name="object" if truth else "observed",
+            true_camera=truth,
+            object_margin_m=lim.object_margin_m,
+            floor_margin_m=lim.floor_margin_m,
+        )
+
+    def crash(self, q: ArrayLike) -> str | None:
+        """What the robot or the camera (where it really is) touches at joints (7,): the TRUE
+        piece, the floor or itself, with no margin; None if nothing. Counts failures only."""
+        return self._contact(
+            q,
+            obstacle=self._object,
+            name="object",
+            true_camera=True,
+            object_margin_m=0.0,
+            floor_margin_m=0.0,
+        )
+
+    def clearance(self, q: ArrayLike, *, cap_m: float = 0.1) -> float:
+        """Distance in metres from the robot and the camera (where it really is) to the TRUE
+        piece at joints (7,), or ``cap_m`` if farther (negative: penetrating)."""
         self.set_joints(q)
         c = self._client
-        lim = self.limits
-        for point in c.getClosestPoints(self._robot, self._object, lim.object_margin_m):
-            return f"{self._link_names[point[3]]}/object"
-        for point in c.getClosestPoints(self._robot, self._floor, lim.floor_margin_m):
+        points = [
+            *c.getClosestPoints(self._robot, self._object, cap_m),
+            *c.getClosestPoints(self._housing, self._object, cap_m),
+        ]
+        return min([float(cap_m), *(float(p[8]) for p in points)])
+
+    def _contact(
+        self,
+        q: ArrayLike,
+        *,
+        obstacle: int | None,
+        name: str,
+        true_camera: bool,
+        object_margin_m: float,
+        floor_margin_m: float,
+    ) -> str | None:
+        self.set_joints(q, true_camera=true_camera)
+        c = self._client
+        if obstacle is not None:
+            for point in c.getClosestPoints(self._robot, obstacle, object_margin_m):
+                return f"{self._link_names[point[3]]}/{name}"
+        for point in c.getClosestPoints(self._robot, self._floor, floor_margin_m):
             if point[3] not in _NO_FLOOR_CHECK:
                 return f"{self._link_names[point[3]]}/floor"
-        if c.getClosestPoints(self._housing, self._object, lim.object_margin_m):
-            return "camera/object"
-        if c.getClosestPoints(self._housing, self._floor, lim.floor_margin_m):
+        if obstacle is not None and c.getClosestPoints(self._housing, obstacle, object_margin_m):
+            return f"camera/{name}"
+        if c.getClosestPoints(self._housing, self._floor, floor_margin_m):
             return "camera/floor"
         for point in c.getClosestPoints(self._housing, self._robot, 0.0):
             if point[4] in _HOUSING_VS_ARM:
                 return f"camera/{self._link_names[point[4]]}"
+        for a, b in self._self_pairs:
+            if c.getClosestPoints(self._robot, self._robot, 0.0, a, b):
+                return f"{self._link_names[a]}/{self._link_names[b]}"
         return None
 
     def path_collision(
-        self, q_from: ArrayLike, q_to: ArrayLike, *, step_rad: float = 0.05
+        self,
+        q_from: ArrayLike,
+        q_to: ArrayLike,
+        *,
+        world: World = World.TRUTH,
+        step_rad: float = PLAN_STEP_RAD,
     ) -> str | None:
-        """First collision along the straight joint-space path, checked every ``step_rad``."""
-        a = np.asarray(q_from, dtype=np.float64)
-        b = np.asarray(q_to, dtype=np.float64)
-        n = max(int(np.ceil(np.max(np.abs(b - a)) / step_rad)), 1)
-        for t in np.linspace(0.0, 1.0, n + 1)[1:-1]:
-            hit = self.collision(a + t * (b - a))
+        """First collision (with margins, in ``world``) along the straight joint-space path,
+        checked every ``step_rad`` of the largest joint's motion (the ends excluded)."""
+        for q in _joint_samples(q_from, q_to, step_rad)[1:-1]:
+            hit = self.collision(q, world=world)
             if hit is not None:
                 return hit
         return None
 
+    def motion_crash(
+        self, q_from: ArrayLike, q_to: ArrayLike, *, step_rad: float = CRASH_STEP_RAD
+    ) -> tuple[str | None, float]:
+        """(first contact with the TRUE piece, floor or itself along the straight joint-space
+        path, or None; the smallest clearance to the true piece on the way, capped at 0.1 m),
+        sampled every ``step_rad``, both ends included. Counts failures only."""
+        hit: str | None = None
+        clearance = np.inf
+        for q in _joint_samples(q_from, q_to, step_rad):
+            clearance = min(clearance, self.clearance(q))
+            if hit is None:
+                hit = self.crash(q)
+        return hit, float(clearance)
+
     # ------------------------------------------------------------------ views
 
-    def reachable(self, T_base_cam: ArrayLike, q_seed: ArrayLike | None = None) -> bool:
-        """True if the camera can be placed exactly at ``T_base_cam`` without collision."""
-        q, _ = self.solve_ik(T_base_cam, Q_READY if q_seed is None else q_seed)
-        return q is not None and self.collision(q) is None
+    def route(
+        self, q_from: ArrayLike, q_to: ArrayLike, *, world: World = World.TRUTH
+    ) -> tuple[tuple[FloatArray, ...] | None, str | None]:
+        """(joint waypoints from ``q_from`` to ``q_to``, None) or (None, what blocks them).
+
+        The straight joint-space move, or, when it would sweep the arm through an obstacle (a
+        jump to the line's other end over a ridge), a detour through the ready pose above it:
+        no motion planner, but the two moves an operator would teach.
+        """
+        target = np.asarray(q_to, dtype=np.float64)
+        blocked = self.path_collision(q_from, target, world=world)
+        if blocked is None:
+            return (target,), None
+        ready = np.asarray(Q_READY, dtype=np.float64)
+        clear = (
+            self.collision(ready, world=world) is None
+            and self.path_collision(q_from, ready, world=world) is None
+            and self.path_collision(ready, target, world=world) is None
+        )
+        return ((ready, target), None) if clear else (None, blocked)
+
+    def reachable(
+        self, query: ReachQuery, q_seed: ArrayLike, *, world: World = World.TRUTH
+    ) -> ReachAnswer:
+        """The contract's answer to ``query`` from joints ``q_seed`` (7,), in ``world``."""
+        return self.plan_view(
+            query.T_base_cam, q_seed, free_dofs=query.free_dofs, world=world
+        ).answer
 
     def plan_view(
-        self, T_base_cam: ArrayLike, q_seed: ArrayLike, *, free_dofs: bool = True
+        self,
+        T_base_cam: ArrayLike,
+        q_seed: ArrayLike,
+        *,
+        free_dofs: bool = True,
+        world: World = World.TRUTH,
+        check_motion: bool = True,
     ) -> ViewSolution:
-        """Execute a requested view, using the free DOFs (roll, back-off) if it is infeasible."""
+        """Execute a requested view from joints ``q_seed``, using the free DOFs (roll, back-off)
+        if it is infeasible as asked; collisions (and, with ``check_motion``, the move there)
+        checked in ``world``."""
         requested = np.asarray(T_base_cam, dtype=np.float64)
         lim = self.limits
         rolls = lim.roll_steps_deg if free_dofs else (0.0,)
         n_back = int(np.floor(lim.max_backoff_m / lim.backoff_step_m + 1e-9)) if free_dofs else 0
         attempts = 0
-        reason = "ik"
+        reason, detail = Reach.IK, ""
         for k in range(n_back + 1):
             backoff = k * lim.backoff_step_m
             blocked = False
@@ -353,27 +537,48 @@ class PandaSim:
                 candidate = requested @ _roll_and_back_off(np.radians(roll_deg), backoff)
                 q, why = self.solve_ik(candidate, q_seed)
                 if q is None:
-                    reason = why
+                    reason, detail = why, ""
                     continue
-                hit = self.collision(q)
+                hit = self.collision(q, world=world)
                 if hit is not None:
-                    reason = f"collision:{hit}"
+                    reason, detail = Reach.COLLISION, hit
                     blocked = True
                     continue
-                return ViewSolution(
+                route: tuple[FloatArray, ...] = (q,)
+                if check_motion:
+                    waypoints, stop = self.route(q_seed, q, world=world)
+                    if waypoints is None:
+                        reason, detail = Reach.MOTION, stop or ""
+                        blocked = True
+                        continue
+                    route = waypoints
+                answer = ReachAnswer(
                     True,
-                    requested,
-                    self.camera_pose(q),
-                    q,
-                    float(np.radians(roll_deg)),
-                    backoff,
-                    attempts,
-                    "ok",
+                    Reach.OK,
+                    T_base_cam=self.camera_pose(q),
+                    roll_rad=float(np.radians(roll_deg)),
+                    backoff_m=backoff,
+                    attempts=attempts,
                 )
+                return ViewSolution(answer, q, route)
             if not blocked:
                 # Backing off helps against collisions, not against reach or joint limits.
                 break
-        return ViewSolution(False, requested, None, None, 0.0, 0.0, attempts, reason)
+        return ViewSolution(ReachAnswer(False, reason, detail, attempts=attempts))
+
+
+def _joint_samples(q_from: ArrayLike, q_to: ArrayLike, step_rad: float) -> FloatArray:
+    """Joint samples (n + 1, 7) along the straight path, ends included, no joint moving more
+    than ``step_rad`` between two."""
+    a = np.asarray(q_from, dtype=np.float64)
+    b = np.asarray(q_to, dtype=np.float64)
+    n = max(int(np.ceil(np.max(np.abs(b - a)) / step_rad)), 1)
+    return np.asarray(a + np.linspace(0.0, 1.0, n + 1)[:, None] * (b - a))
+
+
+def _pose_pair(T: FloatArray) -> tuple[list[float], list[float]]:
+    """(position, quaternion xyzw) lists of a (4, 4) transform, as pybullet takes poses."""
+    return T[:3, 3].tolist(), matrix_to_quat_xyzw(T[:3, :3]).tolist()
 
 
 def _roll_and_back_off(roll_rad: float, backoff_m: float) -> FloatArray:

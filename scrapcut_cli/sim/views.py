@@ -12,8 +12,12 @@ above the piece.
 ``survey``: a dense set of views over the whole piece — a grid of targets on its top surface,
 each seen from straight above and from four sides at 55° elevation.
 
-Both feed :class:`PrePlannedPlanner`, which implements ``exploration.decision.ViewPlanner``
-so the recorder runs one loop for every mode.
+Both feed :class:`PrePlannedPlanner`, which implements ``cell.ViewPlanner`` so the recorder
+runs one loop for every mode. Both are oracles: their views follow the true line and the true
+shape of the piece.
+
+``worker_view``: explore mode's start, where a worker points the robot by hand — a view of the
+line moved and turned by a seeded amount, not the exact line point, normal and tangent.
 """
 
 from __future__ import annotations
@@ -24,8 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from scrapcut_cli.cell import Decision
 from scrapcut_cli.errors import SimError
-from scrapcut_cli.exploration.decision import Decision
 from scrapcut_cli.geometry import (
     cumulative_length,
     interpolate_polyline,
@@ -37,6 +41,12 @@ from scrapcut_cli.recording.frame import Frame
 from scrapcut_cli.sim.objects import ScrapObject
 
 FloatArray = NDArray[np.float64]
+
+#: A worker pointing the robot at the line lands within this much of a view computed from it:
+#: the camera up to 20 mm off along each base axis, its optical axis tilted by up to 10° and
+#: turned about itself by up to 10° (assumed: hand guiding by eye, at ~0.3 m).
+START_POSITION_NOISE_M = 0.02
+START_ANGLE_NOISE_DEG = 10.0
 
 
 def tilt_up(direction: ArrayLike, min_elevation_deg: float) -> FloatArray:
@@ -126,6 +136,31 @@ def views_along(
     return views
 
 
+def worker_view(
+    T_base_cam: ArrayLike,
+    rng: np.random.Generator,
+    *,
+    position_m: float = START_POSITION_NOISE_M,
+    angle_deg: float = START_ANGLE_NOISE_DEG,
+) -> FloatArray:
+    """``T_base_cam`` (4, 4) as a worker would point the camera at it by hand.
+
+    The camera moves by a uniform offset within ±``position_m`` along each base axis; its
+    optical axis tilts by a uniform angle within ``angle_deg`` towards a uniform direction,
+    and the image turns about the axis by a uniform angle within ±``angle_deg``.
+    """
+    from scipy.spatial.transform import Rotation
+
+    T = np.asarray(T_base_cam, dtype=np.float64)
+    offset = rng.uniform(-position_m, position_m, 3)
+    tilt = np.radians(rng.uniform(0.0, angle_deg))
+    azimuth = rng.uniform(0.0, 2.0 * np.pi)
+    roll = np.radians(rng.uniform(-angle_deg, angle_deg))
+    turn = Rotation.from_rotvec(tilt * np.array([np.cos(azimuth), np.sin(azimuth), 0.0]))
+    R = T[:3, :3] @ turn.as_matrix() @ Rotation.from_rotvec([0.0, 0.0, roll]).as_matrix()
+    return make_transform(R, T[:3, 3] + offset)
+
+
 def survey_views(
     obj: ScrapObject,
     *,
@@ -197,7 +232,7 @@ def survey_views(
 
 @dataclass
 class PrePlannedPlanner:
-    """A :class:`~scrapcut_cli.exploration.decision.ViewPlanner` over a fixed list of views.
+    """A :class:`~scrapcut_cli.cell.ViewPlanner` over a fixed list of views.
 
     ``observe`` ignores the frame and moves on; ``skip`` (called by the recorder when a view
     cannot be executed) moves on too.
