@@ -643,6 +643,9 @@ class ExplorationConfig:
     look_past_angles_deg: tuple[float, ...] = rng(
         (60.0, 90.0, 40.0), 0.0, 180.0, "deg", "tilts about an edge"
     )
+    # A look past an edge found nothing and no frame observed the end: look once more from over
+    # the line (a wall at a concave corner shows its paint only from there)
+    look_back: bool = True
     # surface must continue this far beyond a confirmed end
     edge_probe_m: float = rng(0.025, 0.0, 0.5, "m", "a probe over 0.5 m reaches past most pieces")
     # the fitted curve turning more near its end: look past

@@ -80,6 +80,9 @@ def test_explore_mode_runs_algorithm_1_and_logs_its_steps(tmp_path: Path) -> Non
         assert rec.metadata["scrapcut"]["mode"] == "explore"
     assert frames >= 2 and len(log) == frames  # one decision logged per observed view
     assert log[-1]["stop"] is True
+    # The summary says what the robot's collision checks saw, and that nothing was hit.
+    assert "what the camera observed" in result.stdout
+    assert "0 (0 moving)" in result.stdout
     # --method and --hsv reach the planner; the piece is still painted with the preset.
     assert log[0]["method"] == "skeleton"
     hsv = log[0]["paint_hsv"]

@@ -84,11 +84,12 @@ def test_both_ends_of_a_line_longer_than_a_view_are_found(
     assert min(np.linalg.norm(tips[0] - e) for e in ends) < 0.02
     assert min(np.linalg.norm(tips[1] - e) for e in ends) < 0.02
     assert np.linalg.norm(tips[0] - tips[1]) > 0.55
-    # The global fit of the stitched cloud covers the line.
+    # The global fit of the stitched cloud covers the line, within stated margins: nurbs gives
+    # 0.35 mm mean and 0.8 mm max here, the skeleton 0.9 mm and 4.8 mm (its ends wander).
     curve = fit_curve(planner.stitcher.paint_points, planner.method, planner.config)
     error = path_error(curve.points, reference)
     assert error.coverage >= 0.95
-    assert error.mean_m < 0.002
+    assert error.mean_m < 0.002 and error.max_m < 0.008
 
 
 def test_views_look_down_the_surface_normal_from_at_least_the_minimum_distance(
@@ -368,6 +369,8 @@ def test_slanted_ridge_is_crossed_by_looking_past_it(look_past: bool) -> None:
         assert looked and "edge" in looked[0]["look_past"]["why"]
         assert planner.stop_reason == "done"
         assert coverage >= 0.95
+        error = path_error(curve.points, scan.reference)  # 0.18 mm mean, 1.6 mm max measured
+        assert error.mean_m < 0.001 and error.max_m < 0.004
     else:
         assert not looked
         assert coverage < 0.75  # one face only: the paper's early stop

@@ -72,7 +72,11 @@ def test_replay_repeats_every_decision(explored: tuple[Path, LoopResult]) -> Non
     assert run.steps[1].execution_error() == pytest.approx((0.0, 0.0), abs=1e-9)
     assert run.camera_travel_m > 0.5
     fitted = fit_exploration(run)  # the global fit: the pipeline's job on the planner's clouds
-    assert fitted.report.error is not None and fitted.report.error.coverage >= 0.95
+    # The pipe's line within stated margins: 0.4 mm mean, 2.3 mm max measured here (a refused
+    # view leaves a wider gap between frames), about 2.5x and 2x.
+    error = fitted.report.error
+    assert error is not None and error.coverage >= 0.95
+    assert error.mean_m < 0.001 and error.max_m < 0.005
     data = json.loads(json.dumps(run.to_dict()))
     assert data["matches_log"] is True and data["views"] == len(loop.frames)
     assert len(data["steps"]) == len(loop.frames)
@@ -228,8 +232,10 @@ def test_what_if_explores_a_dense_recording(survey: Path) -> None:
     assert run.mode == "what_if" and run.divergences == []
     assert run.stop_reason == "done" and run.endpoints_found == 2
     assert run.views < run.frames_available == 42
+    # 0.4 mm mean and 1.3 mm max here; margins about 2.5x and 3x.
     error = fit_exploration(run).report.error
     assert error is not None and error.coverage >= 0.9
+    assert error.mean_m < 0.001 and error.max_m < 0.004
     assert run.config["what_if"]["start_frame"] in range(42)
     # Every executed view is a recorded one near what was planned.
     for step in run.steps[1:]:

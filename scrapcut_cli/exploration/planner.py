@@ -33,7 +33,10 @@ Stopping: growth(k) <= ``delta_size`` ends a direction. Before declaring an endp
 planner checks that the observed surface goes on past the curve's end in a fan of directions (a
 paint end on a continuing surface is a real end) and that the curve does not turn sharply there;
 otherwise the line may go on behind an edge (the paper's slanted piece) and it looks once more,
-from a view tilted about the edge (``look_past_angles_deg``). A next target within
+from a view tilted about the edge (``look_past_angles_deg``). If that finds no paint either and
+no frame so far has observed the end (the space past the tip is unknown, not free), it looks
+once from over the known line (``look_back``: a wall rising at a concave corner shows its
+painted side only from there). A next target within
 ``revisit_radius_m`` of a visited one also ends the direction (the paper's log of visited
 positions; it counts as an endpoint). After the first end the camera returns to the initial view
 and explores the other direction; the second end stops the run ("done"). A run also stops, with
@@ -56,7 +59,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -138,6 +141,16 @@ FAN_DEG = (0.0, 30.0, -30.0, 60.0, -60.0)
 END_CHORD_M = 0.02
 #: A curve shorter than this has no meaningful turn near its end.
 TURN_SPAN_M = 0.05
+
+
+class ReachLog(TypedDict):
+    """One reachability query as the log keeps it (``reachability`` of a step): the asked camera
+    pose (metres, xyzw, base frame) and the cell's answer (``ReachAnswer.describe()``)."""
+
+    position: list[float]
+    orientation_xyzw: list[float]
+    ok: bool
+    reason: str
 
 
 @dataclass(frozen=True, eq=False)
@@ -379,8 +392,9 @@ class ExplorationPlanner:
         self._direction = 0
         self._initial_ends: list[_End] = []
         self._frontier: _End | None = None
+        self._looked_back = False  # the frontier's end was looked at from over the line
         self._visited: list[FloatArray] = []
-        self._queries: list[dict[str, Any]] = []
+        self._queries: list[ReachLog] = []
         self._reach_s = 0.0
         self._fit_note: dict[str, Any] = {}
         self._look_note: dict[str, Any] = {}
@@ -527,11 +541,12 @@ class ExplorationPlanner:
         if obs.clouds.skipped:
             return self._end_direction("paint_lost")
         if growth <= c.delta_size:
+            look = None
             if pending == "extrapolate" and c.look_past:
                 look = self._look_past()
-                if look is not None:
-                    return look
-            return self._end_direction("endpoint")
+            elif pending == "look_past":
+                look = self._look_back()
+            return look if look is not None else self._end_direction("endpoint")
         assert self._frontier is not None
         end = self._extend(self._frontier, obs)
         if end is None:
@@ -578,6 +593,7 @@ class ExplorationPlanner:
         """
         c = self.config.exploration
         self._frontier = end
+        self._looked_back = False
         tip_normal = self._normal_at(end.tip, fallback=end.tip)
         candidates: list[tuple[float, FloatArray, FloatArray]] = []
         if self._rises_ahead(end, tip_normal):
@@ -739,7 +755,37 @@ class ExplorationPlanner:
             # A concave corner: look back at the wall from over the known line.
             towards = -end.direction
             self._look_note["concave"] = True
-        for angle in c.look_past_angles_deg:
+            self._looked_back = True
+        return self._look_towards(end, normal, towards)
+
+    def _look_back(self) -> Decision | None:
+        """After a look past the frontier's edge that found no new paint: a view of the end
+        from over the known line, when no frame so far has observed the end; else None.
+
+        A look over an edge sees what lies beyond it; a wall rising at the line's end (a
+        concave corner, the flange of a beam) shows its painted side only to a camera over the
+        line. When the occupancy map showed the wall, the first look came from there already
+        (``concave``); when the wall was seen only beside the line or not at all, the space
+        past the tip is unknown, not free, and one look back settles it. An end observed
+        without paint past it (:mod:`.evidence`: surface, fold, edge) needs no second look.
+        """
+        c = self.config.exploration
+        end = self._frontier
+        if end is None or self._looked_back or not c.look_back:
+            return None
+        evidence = self._observed_end(end)
+        if evidence is None or evidence.observed:
+            return None
+        self._evidence_notes.append({"direction": self._direction, **evidence.to_dict()})
+        self._looked_back = True
+        normal = self._normal_at(end.tip, fallback=end.tip)
+        self._look_note = {"why": ["unobserved"], "concave": True}
+        return self._look_towards(end, normal, -end.direction)
+
+    def _look_towards(self, end: _End, normal: FloatArray, towards: FloatArray) -> Decision | None:
+        """A view of the tip from the surface normal tilted towards ``towards`` by one of
+        ``look_past_angles_deg`` (the first feasible), or None."""
+        for angle in self.config.exploration.look_past_angles_deg:
             outward = tilt_about_edge(normal, towards, angle)
             T = self.find_view(end.tip, outward, end.direction)
             if T is not None:
@@ -839,8 +885,14 @@ class ExplorationPlanner:
         t0 = time.perf_counter()
         answer = self._reachable(ReachQuery(T))
         self._reach_s += time.perf_counter() - t0
+        pose = pose_to_dict(T)
         self._queries.append(
-            {**pose_to_dict(T), "ok": answer.feasible, "reason": answer.describe()}
+            ReachLog(
+                position=pose["position"],
+                orientation_xyzw=pose["orientation_xyzw"],
+                ok=answer.feasible,
+                reason=answer.describe(),
+            )
         )
         return answer.feasible
 

@@ -67,7 +67,7 @@ SAME_POSE_M = 0.002
 SAME_POSE_RAD = float(np.radians(0.5))
 
 #: Exploration options added after the log schema; a log without them ran without them.
-LATER_OPTIONS = ("other_side_views", "observed_end")
+LATER_OPTIONS = ("other_side_views", "observed_end", "look_back")
 
 ProgressFn = Callable[[int, int], None]
 
