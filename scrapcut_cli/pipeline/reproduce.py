@@ -78,6 +78,7 @@ SCAN_KEYS = (
     "stop_reason",
     "infeasible_views",
     "collisions",
+    "min_clearance_m",
     "camera_travel_m",
     "frames_used",
     "frames_skipped",
