@@ -541,12 +541,12 @@ class _Session:
     def _count_motion(self, q_from: FloatArray, q_to: FloatArray) -> str | None:
         """Check a move (a straight joint-space path) against the TRUE piece: count a crash,
         keep the closest approach; returns what was hit, if anything."""
-        hit, clearance = self.robot.motion_crash(q_from, q_to)
-        self.min_clearance_m = min(self.min_clearance_m, clearance)
-        if hit is not None:
+        contact = self.robot.motion_crash(q_from, q_to)
+        self.min_clearance_m = min(self.min_clearance_m, contact.clearance_m)
+        if contact.hit is not None:
             self.collisions += 1
             self.motion_collisions += 1
-        return hit
+        return contact.hit
 
     # ------------------------------------------------------------------ views
 
@@ -605,8 +605,9 @@ class _Session:
         if answer.roll_rad != 0.0 or answer.backoff_m > 0.0:
             self.adjusted += 1
         hits = [self._move(q) for q in solution.route]
-        touching = self.robot.crash(self.q)
-        self.min_clearance_m = min(self.min_clearance_m, self.robot.clearance(self.q))
+        contact = self.robot.crash(self.q)
+        touching = contact.hit
+        self.min_clearance_m = min(self.min_clearance_m, contact.clearance_m)
         if touching is not None:
             self.collisions += 1
         frame = self._capture()

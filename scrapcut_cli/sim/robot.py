@@ -29,7 +29,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import Enum
 from types import TracebackType
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -97,6 +97,8 @@ PLAN_STEP_RAD = 0.05
 #: A finer step for counting crashes against the true piece, with no margin (a link 0.8 m from
 #: the joint moves 8 mm between two samples).
 CRASH_STEP_RAD = 0.01
+#: Clearances to the true piece are measured up to this distance (metres).
+CLEARANCE_CAP_M = 0.1
 
 
 class World(Enum):
@@ -108,6 +110,14 @@ class World(Enum):
     #: The voxels the camera has observed so far (``sim.observed``): what a real cell knows,
     #: and all that explore mode plans with.
     OBSERVED = "observed"
+
+
+class Contact(NamedTuple):
+    """What the robot or the camera touches (``link/obstacle``, or None) and the clearance to
+    the true piece, metres, at most :data:`CLEARANCE_CAP_M` (negative: into it)."""
+
+    hit: str | None
+    clearance_m: float
 
 
 @dataclass(frozen=True, eq=False)
@@ -397,28 +407,29 @@ class PandaSim:
             floor_margin_m=lim.floor_margin_m,
         )
 
-    def crash(self, q: ArrayLike) -> str | None:
-        """What the robot or the camera (where it really is) touches at joints (7,): the TRUE
-        piece, the floor or itself, with no margin; None if nothing. Counts failures only."""
-        return self._contact(
-            q,
-            obstacle=self._object,
-            name="object",
-            true_camera=True,
-            object_margin_m=0.0,
-            floor_margin_m=0.0,
-        )
-
-    def clearance(self, q: ArrayLike, *, cap_m: float = 0.1) -> float:
-        """Distance in metres from the robot and the camera (where it really is) to the TRUE
-        piece at joints (7,), or ``cap_m`` if farther (negative: penetrating)."""
+    def crash(self, q: ArrayLike) -> Contact:
+        """What the robot or the camera (where it really is) touches at joints (7,), with no
+        margin: the TRUE piece or the floor; and the clearance to the true piece. Counts
+        failures, never plans (self-collision is the robot's own model: planning checks it)."""
         self.set_joints(q)
         c = self._client
-        points = [
-            *c.getClosestPoints(self._robot, self._object, cap_m),
-            *c.getClosestPoints(self._housing, self._object, cap_m),
-        ]
-        return min([float(cap_m), *(float(p[8]) for p in points)])
+        cap = CLEARANCE_CAP_M
+        hit: str | None = None
+        clearance = cap
+        for body, name in ((self._robot, None), (self._housing, "camera")):
+            for point in c.getClosestPoints(body, self._object, cap):
+                distance = float(point[8])
+                if distance <= 0.0 and hit is None:
+                    hit = f"{name or self._link_names[point[3]]}/object"
+                clearance = min(clearance, distance)
+        if hit is None:
+            for point in c.getClosestPoints(self._robot, self._floor, 0.0):
+                if point[3] not in _NO_FLOOR_CHECK:
+                    hit = f"{self._link_names[point[3]]}/floor"
+                    break
+        if hit is None and c.getClosestPoints(self._housing, self._floor, 0.0):
+            hit = "camera/floor"
+        return Contact(hit, clearance)
 
     def _contact(
         self,
@@ -468,17 +479,16 @@ class PandaSim:
 
     def motion_crash(
         self, q_from: ArrayLike, q_to: ArrayLike, *, step_rad: float = CRASH_STEP_RAD
-    ) -> tuple[str | None, float]:
-        """(first contact with the TRUE piece, floor or itself along the straight joint-space
-        path, or None; the smallest clearance to the true piece on the way, capped at 0.1 m),
-        sampled every ``step_rad``, both ends included. Counts failures only."""
+    ) -> Contact:
+        """:meth:`crash` along the straight joint-space path, sampled every ``step_rad``, both
+        ends included: the first contact, and the smallest clearance on the way."""
         hit: str | None = None
-        clearance = np.inf
+        clearance = CLEARANCE_CAP_M
         for q in _joint_samples(q_from, q_to, step_rad):
-            clearance = min(clearance, self.clearance(q))
-            if hit is None:
-                hit = self.crash(q)
-        return hit, float(clearance)
+            contact = self.crash(q)
+            hit = hit or contact.hit
+            clearance = min(clearance, contact.clearance_m)
+        return Contact(hit, clearance)
 
     # ------------------------------------------------------------------ views
 
