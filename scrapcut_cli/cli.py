@@ -3,13 +3,20 @@
 Subcommands live in ``scrapcut_cli.commands.<name>`` and are imported only when run, so
 ``scrapcut --help`` does not pay for numpy, open3d or pybullet. A :class:`ScrapcutError` becomes
 one line on stderr and exit code 1, as does an OS error on a named file (permission denied, disk
-full); usage errors exit with 2 (click's default).
+full); usage errors exit with 2 (click's default). SIGTERM and SIGHUP (what ``timeout``, systemd
+and schedulers send) unwind like Ctrl-C, so unfinished outputs are removed, and exit with
+128 + the signal number. numpy's RuntimeWarnings are not shown: results are checked where
+they are made (a non-finite number never reaches an output file).
 """
 
 from __future__ import annotations
 
 import importlib
 import importlib.util
+import signal
+import sys
+import warnings
+from types import FrameType
 from typing import Any
 
 import click
@@ -125,6 +132,33 @@ def cli() -> None:
     """
 
 
+class Terminated(BaseException):
+    """A termination signal arrived: unwinds the command like Ctrl-C (``finally`` blocks and
+    the atomic writers' cleanup run), never caught by ``except Exception``."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _terminate(signum: int, frame: FrameType | None) -> None:
+    # Once is enough: a second signal must not interrupt the cleanup the first one started.
+    for sig in _TERMINATING:
+        signal.signal(sig, signal.SIG_IGN)
+    raise Terminated(signum)
+
+
+_TERMINATING = tuple(getattr(signal, n) for n in ("SIGTERM", "SIGHUP") if hasattr(signal, n))
+
+
 def main() -> None:
     """Console-script entry point."""
-    cli(prog_name="scrapcut")
+    for sig in _TERMINATING:
+        signal.signal(sig, _terminate)
+    warnings.simplefilter("ignore", RuntimeWarning)
+    try:
+        cli(prog_name="scrapcut")
+    except Terminated as exc:
+        name = signal.Signals(exc.signum).name
+        click.echo(f"scrapcut: stopped by {name}; unfinished outputs were removed", err=True)
+        sys.exit(128 + exc.signum)

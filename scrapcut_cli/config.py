@@ -84,6 +84,7 @@ class RecordingConfig:
     depth_topic: str | None = None
     info_topic: str | None = None
     base_frame: str | None = None  # None: the TF root
+    salvage: bool = False  # read a damaged MCAP up to the damage (recording.salvage)
     # colour/depth pairing by header stamp (D435i at 30 Hz: 33 ms)
     sync_tolerance_s: float = rng(
         0.02,
@@ -208,6 +209,12 @@ class PerceptionConfig:
     # specks, not a stroke: a speck is a drop a few mm across (at most ~12 mm^2 seen on the
     # simulator's heavy overspray), the least a stroke shows is a wire's share (4 x 25 mm).
     # 0: off
+    # A stroke (25 mm wide) covers at most about a fifth of a wrist camera's image even at
+    # its closest (0.17 m, 150 mm across); a frame mostly in the paint's colour shows a
+    # paint-coloured surface or light, or a colour range that is too wide: it is skipped.
+    max_paint_share: float = rng(
+        0.5, 0.01, 1.0, "", "a share of the image's pixels (1: any share is accepted)"
+    )
     min_paint_area_m2: float = rng(
         25e-6,
         0.0,

@@ -9,6 +9,11 @@ class ScrapcutError(Exception):
     """A known failure the user can act on; the message is one line naming the problem."""
 
 
+class FileError(ScrapcutError):
+    """An input or output the file system cannot serve as asked: not a regular file, a link
+    loop, a write that did not reach the disk whole."""
+
+
 class ConfigError(ScrapcutError):
     """Bad parameter values or an unreadable configuration file."""
 

@@ -13,6 +13,10 @@ from scipy.spatial.transform import Rotation
 
 FloatArray = NDArray[np.float64]
 
+#: No coordinate of a robot cell lies 1000 km from its base: a larger one is damaged data (and
+#: 1e300 would overflow the squares of every distance computed from it).
+MAX_COORDINATE_M = 1e6
+
 
 # --------------------------------------------------------------------------- SE(3)
 
@@ -195,12 +199,22 @@ def polyline_tangents(points: ArrayLike) -> FloatArray:
     return np.asarray(t / n)
 
 
+#: (query, segment) pairs evaluated at once by :class:`PolylineDistance` (~100 MB of arrays);
+#: a query with more candidates than _CROWDED (and a tenth of all) is compared with all.
+_PAIRS_PER_BATCH = 1 << 20
+_CROWDED = 1024
+
+
 class PolylineDistance:
     """Exact distances from query points to an ordered polyline (nearest point on its segments).
 
-    Candidate segments come from a KD-tree over the segment midpoints; a segment can only be
-    nearest if its midpoint is within (distance to the nearest midpoint + longest half segment),
-    so the search is exact, not approximate.
+    Candidate segments come from a KD-tree over the midpoints of pieces of the segments (a
+    long segment is cut into pieces about twice the median segment long): a segment can only
+    be nearest if one of its pieces' midpoints is within (distance to the nearest piece
+    midpoint + the longest half piece), so the search is exact, not approximate. One long
+    segment (a jump in an unordered path) thus does not make every segment a candidate, and
+    memory stays bounded however many candidates there are (batches; a query with most
+    segments as candidates, near the centre of a closed curve, is compared with all at once).
     """
 
     def __init__(self, points: ArrayLike) -> None:
@@ -213,9 +227,20 @@ class PolylineDistance:
         self._a = pts[:-1]
         self._d = pts[1:] - pts[:-1]
         self._len2 = np.einsum("ij,ij->i", self._d, self._d)
-        half = 0.5 * np.sqrt(self._len2)
-        self._half_max = float(half.max())
-        self._tree = cKDTree(self._a + 0.5 * self._d)
+        lengths = np.sqrt(self._len2)
+        positive = lengths[lengths > 0]
+        piece = max(
+            2.0 * float(np.median(positive)) if len(positive) else 1.0,
+            float(lengths.sum()) / 1e6,  # at most about a million extra pieces
+        )
+        pieces = np.maximum(1, np.ceil(lengths / piece)).astype(np.int64)
+        self._segment_of = np.repeat(np.arange(len(lengths)), pieces)
+        first = np.repeat(np.cumsum(pieces) - pieces, pieces)
+        k = np.arange(len(self._segment_of)) - first
+        fraction = (k + 0.5) / pieces[self._segment_of]
+        mids = self._a[self._segment_of] + fraction[:, None] * self._d[self._segment_of]
+        self._half_max = float((0.5 * lengths / pieces).max())
+        self._tree = cKDTree(mids)
 
     def query(self, query_points: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Distances (M,), nearest points (M, 3), and polyline parameters (M,).
@@ -231,10 +256,66 @@ class PolylineDistance:
             return best_d2, best_p, best_u
         d0, _ = self._tree.query(q)
         radius = d0 + self._half_max + 1e-12
-        candidates = self._tree.query_ball_point(q, radius)
-        lengths = np.fromiter((len(c) for c in candidates), dtype=np.int64, count=m)
-        rows = np.repeat(np.arange(m), lengths)
-        segs = np.fromiter((i for c in candidates for i in c), dtype=np.int64, count=rows.size)
+        # Far from a closed curve (or at its centre) every segment is a candidate: work in
+        # batches of a bounded number of (query, segment) pairs, so memory stays flat.
+        counts = np.asarray(self._tree.query_ball_point(q, radius, return_length=True))
+        # Queries with most segments as candidates (the centre of a closed curve) are cheaper
+        # to compare with every segment at once than to list.
+        crowded = counts > max(_CROWDED, len(self._segment_of) // 10)
+        if crowded.any():
+            self._nearest_of_all(q, np.flatnonzero(crowded), best_d2, best_p, best_u)
+            counts = np.where(crowded, 0, counts)
+        ends = np.cumsum(counts)
+        start = 0
+        while start < m:
+            budget = (ends[start - 1] if start else 0) + _PAIRS_PER_BATCH
+            stop = max(start + 1, int(np.searchsorted(ends, budget, side="right")))
+            rows = np.arange(start, stop)[~crowded[start:stop]]
+            if len(rows):
+                self._nearest(q, radius, rows, best_d2, best_p, best_u)
+            start = stop
+        return np.sqrt(best_d2), best_p, best_u
+
+    def _nearest_of_all(
+        self,
+        q: FloatArray,
+        rows: NDArray[np.int64],
+        best_d2: FloatArray,
+        best_p: FloatArray,
+        best_u: FloatArray,
+    ) -> None:
+        """Exact nearest segment of queries ``rows`` among all segments, in batches."""
+        n = len(self._a)
+        per_batch = max(1, _PAIRS_PER_BATCH // n)
+        safe = np.where(self._len2 > 0, self._len2, 1.0)
+        for k in range(0, len(rows), per_batch):
+            batch = rows[k : k + per_batch]
+            rel = q[batch, None, :] - self._a[None, :, :]  # (B, N, 3)
+            t = np.clip(np.einsum("bnj,nj->bn", rel, self._d) / safe, 0.0, 1.0)
+            t = np.where(self._len2 > 0, t, 0.0)
+            diff = rel - t[:, :, None] * self._d[None, :, :]
+            d2 = np.einsum("bnj,bnj->bn", diff, diff)
+            seg = np.argmin(d2, axis=1)  # lowest index wins ties
+            pick = np.arange(len(batch))
+            best_d2[batch] = d2[pick, seg]
+            best_p[batch] = self._a[seg] + t[pick, seg][:, None] * self._d[seg]
+            best_u[batch] = seg + t[pick, seg]
+
+    def _nearest(
+        self,
+        q: FloatArray,
+        radius: FloatArray,
+        which: NDArray[np.int64],
+        best_d2: FloatArray,
+        best_p: FloatArray,
+        best_u: FloatArray,
+    ) -> None:
+        """Exact nearest segment of queries ``which`` among their ball candidates."""
+        candidates = self._tree.query_ball_point(q[which], radius[which])
+        lengths = np.fromiter((len(c) for c in candidates), dtype=np.int64, count=len(which))
+        rows = np.repeat(which, lengths)
+        pieces = np.fromiter((i for c in candidates for i in c), dtype=np.int64, count=rows.size)
+        segs = self._segment_of[pieces]
         a = self._a[segs]
         d = self._d[segs]
         l2 = self._len2[segs]
@@ -251,7 +332,6 @@ class PolylineDistance:
         best_d2[rows[pick]] = d2[pick]
         best_p[rows[pick]] = p[pick]
         best_u[rows[pick]] = segs[pick] + t[pick]
-        return np.sqrt(best_d2), best_p, best_u
 
     def distance(self, query_points: ArrayLike) -> FloatArray:
         """Distances (M,) in metres from each query point to the polyline."""

@@ -174,3 +174,28 @@ def test_bad_reference_and_config_raise() -> None:
         path_error(
             line(0.0, 0.1), line(0.0, 0.1), config=EvaluationConfig(coverage_threshold_m=-1.0)
         )
+
+
+def test_a_closed_100k_point_path_is_measured_in_bounded_memory() -> None:
+    """A closed path (a half circle shut by its 0.6 m diameter) of 100,000 points against a
+    reference 2 mm outside it. Every reference sample lies within half the long segment of
+    its midpoint, so a midpoint KD-tree alone made every segment a candidate of every sample
+    (10^5 x 2,000 pairs, gigabytes); cut into pieces, each sample has a few."""
+    import tracemalloc
+
+    n = 100_000
+    t = np.linspace(0.0, np.pi, n - 1)
+    closed = np.column_stack([0.3 * np.cos(t), 0.3 * np.sin(t), np.zeros(n - 1)])
+    closed = np.vstack([closed, closed[:1]])  # back along the diameter
+    s = np.linspace(0.0, np.pi, 2000)
+    outside = np.column_stack([0.302 * np.cos(s), 0.302 * np.sin(s), np.zeros(2000)])
+    tracemalloc.start()
+    try:
+        e = path_error(closed, outside)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 200e6
+    assert e.mean_m == pytest.approx(2 * MM, abs=1e-6)  # the arc is 2 mm away everywhere
+    assert e.max_m == pytest.approx(2 * MM, abs=1e-6)
+    assert e.reverse_max_m == pytest.approx(0.302, abs=1e-3)  # the diameter's middle

@@ -126,6 +126,12 @@ def recording_options(f: F) -> F:
             default=None,
             help="Max colour/depth stamp difference for a pair [ms] (default 20).",
         ),
+        click.option(
+            "--salvage",
+            is_flag=True,
+            default=None,
+            help="Read a damaged or truncated MCAP up to the damage (as `mcap recover`).",
+        ),
     ]
     for option in reversed(options):
         f = option(f)
@@ -182,6 +188,7 @@ def build_config(
     info_topic: str | None = None,
     base_frame: str | None = None,
     sync_tolerance_ms: float | None = None,
+    salvage: bool | None = None,
     paint: str | None = None,
     hsv: str | None = None,
 ) -> ScrapcutConfig:
@@ -194,6 +201,7 @@ def build_config(
         info_topic=info_topic,
         base_frame=base_frame,
         sync_tolerance_s=None if sync_tolerance_ms is None else sync_tolerance_ms / 1000.0,
+        salvage=salvage or None,
     )
     parsed = parse_hsv(hsv)
     if parsed is not None:
@@ -272,6 +280,16 @@ _STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
         1.0,
         config_type("perception.sor_std_ratio"),
         "Statistical outlier removal: standard deviations allowed (default 2.0).",
+    ),
+    (
+        "--max-paint-share",
+        "max_paint_share",
+        "perception",
+        "max_paint_share",
+        1,
+        config_type("perception.max_paint_share"),
+        "Skip frames with more of the image in the paint's colour: no stroke fills it "
+        "(default 0.5; 1: off).",
     ),
     (
         "--min-paint-area-mm2",

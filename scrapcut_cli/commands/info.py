@@ -28,6 +28,7 @@ def info(
     info_topic: str | None,
     base_frame: str | None,
     sync_tolerance_ms: float | None,
+    salvage: bool | None,
     config_path: Path | None,
 ) -> None:
     """Describe RECORDING (an .mcap file, a ROS 1 .bag or a ROS 2 bag directory).
@@ -46,6 +47,7 @@ def info(
         info_topic=info_topic,
         base_frame=base_frame,
         sync_tolerance_ms=sync_tolerance_ms,
+        salvage=salvage,
     )
     summary = summarize_recording(recording, config.recording)
     if as_json:

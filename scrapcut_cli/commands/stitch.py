@@ -41,24 +41,74 @@ def write_cloud(target: Path, points: NDArray[np.float64]) -> None:
     """Write points (N, 3), metres, as PLY or PCD (by ``target``'s suffix), atomically.
 
     open3d chooses the format by the file name's extension, so it writes to a staging name
-    with the target's suffix, which is then renamed onto the atomic temporary.
+    with the target's suffix, which is then renamed onto the atomic temporary. open3d reports
+    success even when the disk refused its writes, so the file is read back and its point
+    count checked before it is committed.
     """
     import numpy as np
 
-    from scrapcut_cli._io import atomic_path
+    from scrapcut_cli._io import atomic_path, quiet_stderr
     from scrapcut_cli._open3d import o3d
-    from scrapcut_cli.errors import PerceptionError
+    from scrapcut_cli.errors import FileError, PerceptionError
 
     o3 = o3d()
     cloud = o3.geometry.PointCloud(o3.utility.Vector3dVector(np.asarray(points, np.float64)))
-    with atomic_path(target) as tmp:
+
+    def verify(tmp: Path) -> None:
+        if binary_cloud_size(tmp) != tmp.stat().st_size:
+            raise FileError(f"{target} was written incompletely (is the disk full?)")
+
+    with atomic_path(target, verify=verify) as tmp:
         staging = tmp.with_name(tmp.name + target.suffix.lower())
         try:
-            if len(points) == 0 or not o3.io.write_point_cloud(str(staging), cloud):
+            with quiet_stderr():
+                written = len(points) > 0 and o3.io.write_point_cloud(str(staging), cloud)
+            if not written:
                 raise PerceptionError(f"cannot write {len(points)} points to {target}")
             os.replace(staging, tmp)
         finally:
             staging.unlink(missing_ok=True)
+
+
+_PLY_TYPES = {"char": 1, "uchar": 1, "short": 2, "ushort": 2, "int": 4, "uint": 4, "float": 4}
+_PLY_TYPES |= {"double": 8, "int8": 1, "uint8": 1, "int16": 2, "uint16": 2, "int32": 4}
+_PLY_TYPES |= {"uint32": 4, "float32": 4, "float64": 8}
+
+
+def binary_cloud_size(path: Path) -> int:
+    """The size in bytes a binary PLY or PCD file of vertices must have, from its header
+    (-1 if the header is incomplete or not such a file): header + points x point size."""
+    with path.open("rb") as f:
+        head = f.read(4096)
+    if head.startswith(b"ply\n"):
+        end = head.find(b"end_header\n")
+        if end < 0 or b"format binary" not in head[:end]:
+            return -1
+        count, size = 0, 0
+        for line in head[:end].decode("ascii", "replace").splitlines():
+            words = line.split()
+            if words[:2] == ["element", "vertex"] and len(words) == 3:
+                count = int(words[2])
+            elif words[:1] == ["property"] and len(words) == 3:
+                size += _PLY_TYPES.get(words[1], 0)
+        return end + len("end_header\n") + count * size
+    end = head.find(b"DATA binary\n")
+    if end < 0:
+        return -1
+    fields = {}
+    for line in head[:end].decode("ascii", "replace").splitlines():
+        name, _, value = line.partition(" ")
+        fields[name] = value
+    try:
+        sizes = [int(v) for v in fields.get("SIZE", "").split()]
+        counts = [int(v) for v in fields.get("COUNT", "").split()]
+        return (
+            end
+            + len("DATA binary\n")
+            + int(fields["POINTS"]) * sum(s * c for s, c in zip(sizes, counts, strict=True))
+        )
+    except (KeyError, ValueError):
+        return -1
 
 
 @click.command("stitch")

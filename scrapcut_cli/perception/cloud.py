@@ -53,6 +53,8 @@ SKIP_NO_PAINT = "no_paint"
 SKIP_SCATTERED_PAINT = "scattered_paint"
 SKIP_NO_VALID_DEPTH = "no_valid_depth"
 SKIP_TOO_LITTLE_PAINT = "too_little_paint"
+#: More of the image in the paint's colour than PerceptionConfig.max_paint_share: no stroke.
+SKIP_PAINT_FILLS_IMAGE = "paint_fills_image"
 
 
 @dataclass(frozen=True, eq=False)
@@ -430,6 +432,8 @@ def process_frame(frame: Frame, hsv: HsvRange, config: PerceptionConfig) -> Fram
     points, pixels, paint_pixels = backproject_paint(frame, hsv, config)
     if paint_pixels == 0:
         return skipped(SKIP_NO_PAINT, 0, 0)
+    if paint_pixels > config.max_paint_share * frame.color.shape[0] * frame.color.shape[1]:
+        return skipped(SKIP_PAINT_FILLS_IMAGE, paint_pixels, 0)
     if len(points) == 0:
         # Scattered specks (rust lifted into the range by noise, overspray) and paint without
         # usable depth need different remedies; telling them apart costs a second filter on
@@ -512,6 +516,11 @@ class PerceptionTally:
             hints.append("check the depth range (--min-depth-mm/--max-depth-mm)")
         if self.skip_reasons[SKIP_TOO_LITTLE_PAINT]:
             hints.append("lower --min-paint-points")
+        if self.skip_reasons[SKIP_PAINT_FILLS_IMAGE]:
+            hints.append(
+                "the colour range covers most of the image, not a stroke (a paint-coloured "
+                "surface or light?): choose the paint with --paint or --hsv H1,H2,S,V"
+            )
         raise PerceptionError(
             f"{self.paint_pixels} pixels of {self.hsv.describe()} in {self.frames} frames but "
             f"no usable paint points ({reasons}); {'; '.join(hints)}"

@@ -20,7 +20,8 @@ import functools
 import hashlib
 import json
 import os
-import struct
+import stat
+import tempfile
 from collections.abc import Generator, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,11 +31,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from scrapcut_cli._io import check_input_file, file_kind
 from scrapcut_cli.config import RecordingConfig
-from scrapcut_cli.errors import RecordingError
+from scrapcut_cli.errors import FileError, RecordingError
 from scrapcut_cli.geometry import transform_points
 from scrapcut_cli.recording import messages as m
 from scrapcut_cli.recording.frame import CameraModel, Frame
+from scrapcut_cli.recording.salvage import SalvageReport, salvage_mcap
+from scrapcut_cli.recording.structure import Damaged, check_mcap, check_ros1
 from scrapcut_cli.recording.tf import TfBuffer
 
 #: Default topics, first that exists wins (DESIGN.md: realsense-ros 4.x, then ROS 1 names).
@@ -82,8 +86,9 @@ class FramePlan:
     usable, skipped : int
         Colour images that become frames / that do not.
     skip_reasons : dict[str, int]
-        ``no_depth`` (no depth image within the sync tolerance), ``pose_out_of_range``
-        (the stamp lies outside the sampled TF time range); only reasons that occur.
+        ``no_depth`` (no depth image within the sync tolerance), ``duplicate_stamp`` (an
+        earlier colour image has the same stamp), ``pose_out_of_range`` (the stamp lies
+        outside the sampled TF time range); only reasons that occur.
     unpaired_depth : int
         Depth images no colour image was paired with.
     stamps_ns : (usable,) int64
@@ -117,43 +122,21 @@ class _ImageHeaders:
     size: tuple[int, int] | None = None
 
 
-def _reader_errors() -> tuple[type[BaseException], ...]:
-    """Exceptions rosbags (and the codecs under it) raise for damaged input."""
-    from rosbags.highlevel import AnyReaderError
-    from rosbags.rosbag1 import ReaderError as Reader1Error
-    from rosbags.rosbag2 import ReaderError as Reader2Error
-    from rosbags.serde import SerdeError
-    from rosbags.typesys import TypesysError
-
-    errors: list[type[BaseException]] = [
-        AnyReaderError,
-        Reader1Error,
-        Reader2Error,
-        SerdeError,
-        TypesysError,
-        struct.error,
-        EOFError,
-        OSError,
-        UnicodeDecodeError,
-    ]
-    try:
-        from backports.zstd import ZstdError
-
-        errors.append(ZstdError)
-    except ImportError:  # Python >= 3.14 ships compression.zstd
-        try:
-            from compression.zstd import ZstdError  # type: ignore[import-not-found,no-redef]
-
-            errors.append(ZstdError)
-        except ImportError:
-            pass
-    return tuple(errors)
-
-
 def detect_format(path: Path) -> str:
-    """``mcap``, ``ros1`` or ``ros2`` from the path's contents (not only its name)."""
-    if not path.exists():
-        raise RecordingError(f"recording not found: {path}")
+    """``mcap``, ``ros1`` or ``ros2`` from the path's contents (not only its name).
+
+    Only regular files and folders are opened: a named pipe or a device is refused at once.
+    """
+    try:
+        st = path.stat()
+    except (FileNotFoundError, NotADirectoryError):
+        raise RecordingError(f"recording not found: {path}") from None
+    except OSError as exc:
+        raise RecordingError(f"cannot read {path}: {exc.strerror}") from None
+    if not stat.S_ISREG(st.st_mode) and not stat.S_ISDIR(st.st_mode):
+        raise RecordingError(
+            f"{path} is {file_kind(st.st_mode)}, not a recording file; copy it to a file first"
+        )
     if path.is_dir():
         if (path / "metadata.yaml").is_file():
             return "ros2"
@@ -214,12 +197,15 @@ class Recording:
         self.path = path
         self.config = config
         self.format = detect_format(path)
-        self._errors = _reader_errors()
-        default_store = m.typestore()
+        #: What ``--salvage`` kept of a damaged MCAP (None: the file was read as it is).
+        self.salvaged: SalvageReport | None = None
+        self._scratch: tempfile.TemporaryDirectory[str] | None = None
+        self._source = self._checked_source()
         try:
-            self._reader = AnyReader([path], default_typestore=default_store)
+            self._reader = AnyReader([self._source], default_typestore=m.typestore())
             self._reader.open()
-        except self._errors as exc:
+        except Exception as exc:  # whatever rosbags raises on a file that passed the checks
+            self._drop_scratch()
             raise RecordingError(self._open_error(exc)) from None
         self._connections: dict[str, list[Any]] = {}
         for conn in self._reader.connections:
@@ -227,6 +213,83 @@ class Recording:
         self._tf: TfBuffer | None = None
         self._plan: FramePlan | None = None
         self._headers: tuple[_ImageHeaders, _ImageHeaders] | None = None
+
+    def _checked_source(self) -> Path:
+        """The file or folder to hand to rosbags, after the structure checks (a salvaged copy
+        of a damaged MCAP with ``--salvage``)."""
+        if self.format == "ros1":
+            try:
+                check_ros1(self.path)
+            except Damaged as exc:
+                raise RecordingError(
+                    f"damaged ROS 1 bag {self.path}: {exc}; a bag cut off while recording can be "
+                    "rebuilt with `rosbag reindex`"
+                ) from None
+            return self.path
+        files = [self.path] if self.format == "mcap" else self._storage_files()
+        for file in files:
+            try:
+                check_mcap(file)
+            except Damaged as exc:
+                if self.format == "mcap" and self.config.salvage:
+                    return self._salvage()
+                if not _has_mcap_footer(file):
+                    what = "truncated (no footer; the recorder was cut off)"
+                    raise RecordingError(
+                        f"MCAP file {file} is {what}; `mcap recover` can salvage its complete "
+                        f"chunks{self._salvage_hint}"
+                    ) from None
+                raise RecordingError(
+                    f"damaged recording {file}: {exc} (try `mcap recover`{self._salvage_hint})"
+                ) from None
+        return self.path
+
+    @property
+    def _salvage_hint(self) -> str:
+        return ", or --salvage to read up to the damage" if self.format == "mcap" else ""
+
+    def _storage_files(self) -> list[Path]:
+        """A ROS 2 bag's MCAP storage files (each must be a regular file)."""
+        files = []
+        for file in sorted(self.path.iterdir()):
+            if file.suffix in (".mcap", ".db3") or file.name == "metadata.yaml":
+                try:
+                    check_input_file(file, "bag file")
+                except FileError as exc:
+                    raise RecordingError(str(exc)) from None
+                if file.suffix == ".mcap":
+                    files.append(file)
+        return files
+
+    def _salvage(self) -> Path:
+        self._scratch = tempfile.TemporaryDirectory(prefix="scrapcut-salvage-")
+        copy = Path(self._scratch.name) / self.path.name
+        try:
+            self.salvaged = salvage_mcap(self.path, copy)
+        except BaseException:
+            self._drop_scratch()
+            raise
+        return copy
+
+    def _drop_scratch(self) -> None:
+        if self._scratch is not None:
+            self._scratch.cleanup()
+            self._scratch = None
+
+    def _damaged(self, exc: BaseException) -> str:
+        """One line for whatever a reading library raised on damaged content."""
+        from rosbags.rosbag1 import ReaderError as Reader1Error
+        from rosbags.rosbag2 import ReaderError as Reader2Error
+
+        text = str(exc).strip()
+        if not isinstance(exc, Reader1Error | Reader2Error) or not text:
+            text = f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+        hint = {
+            "mcap": "try `mcap recover`, or --salvage to read up to the damage",
+            "ros1": "try `rosbag reindex`",
+            "ros2": "try `ros2 bag reindex`",
+        }[self.format]
+        return f"damaged recording {self.path}: {text[:300]} ({hint})"
 
     def _open_error(self, exc: BaseException) -> str:
         reason = str(exc).strip() or type(exc).__name__
@@ -244,6 +307,8 @@ class Recording:
                 f"cannot read ROS 1 bag {self.path}: {reason}; a bag cut off while recording "
                 "can be rebuilt with `rosbag reindex`"
             )
+        if not isinstance(exc, OSError | ValueError) or isinstance(exc, UnicodeDecodeError):
+            return self._damaged(exc)
         return f"cannot read {self.format} recording {self.path}: {reason}"
 
     # ------------------------------------------------------------------ lifecycle
@@ -251,6 +316,7 @@ class Recording:
     def close(self) -> None:
         if self._reader.stack is not None:
             self._reader.close()
+        self._drop_scratch()
 
     def __enter__(self) -> Recording:
         return self
@@ -310,11 +376,10 @@ class Recording:
         from mcap.exceptions import McapError
         from mcap.reader import make_reader
 
-        errors: tuple[type[BaseException], ...] = (McapError, *self._errors)
         try:
-            with self.path.open("rb") as f:
+            with self._source.open("rb") as f:
                 return {md.name: dict(md.metadata) for md in make_reader(f).iter_metadata()}
-        except errors as exc:
+        except (McapError, Exception) as exc:  # a damaged metadata record, whatever it raises
             raise RecordingError(f"cannot read the metadata of {self.path}: {exc}") from None
 
     def _custom_data_metadata(self) -> dict[str, dict[str, str]]:
@@ -405,15 +470,18 @@ class Recording:
         try:
             for conn, log_time, raw in self._reader.messages(connections=conns):
                 yield conn, int(log_time), raw
-        except self._errors as exc:
-            raise RecordingError(f"damaged recording {self.path}: {exc}") from None
+        except Exception as exc:  # rosbags on damaged data: KeyError, AssertionError, zstd...
+            raise RecordingError(self._damaged(exc)) from None
 
     def deserialize(self, raw: bytes | memoryview, msgtype: str) -> Any:
         """A message object from its bytes (ROS 1 field names for ``.bag`` recordings)."""
         try:
             return self._reader.deserialize(bytes(raw), msgtype)
-        except self._errors as exc:
-            raise RecordingError(f"cannot decode a {msgtype} message: {exc}") from None
+        except Exception as exc:  # a damaged payload, whatever the deserialiser raises
+            text = str(exc).strip()[:200] or type(exc).__name__
+            raise RecordingError(
+                f"damaged recording {self.path}: cannot decode a {msgtype} message ({text})"
+            ) from None
 
     def messages(self, topics: Iterable[str]) -> Iterator[tuple[str, int, Any]]:
         """(topic, stamp_ns, message) for the given topics, in log-time order.
@@ -499,6 +567,15 @@ class Recording:
                 raise RecordingError(
                     f"base frame {base!r} is not in the TF tree; TF frames: {_frames_text(self.tf)}"
                 )
+            moving = self.tf.moving_links(base)
+            if moving:
+                # A path in a frame that moves during the scan is no path at all.
+                root = self.tf.root(base)
+                raise RecordingError(
+                    f"--base-frame {base} moves during the scan (its TF chain to {root!r} has "
+                    f"the time-varying link {moving[-1][0]} -> {moving[-1][1]}); pass the robot's "
+                    f"fixed base ({root}) or a frame fixed to it"
+                )
             return base
         camera = self.camera_frame
         if not self.tf.has_frame(camera):
@@ -506,7 +583,19 @@ class Recording:
                 f"no TF path from image frame {camera!r} to a base frame: {camera!r} is not in "
                 f"/tf or /tf_static; TF frames: {_frames_text(self.tf)}"
             )
-        return self.tf.root(camera)
+        root = self.tf.root(camera)
+        # Another tree of moving frames means the robot's chain is split: the camera's tree
+        # then hangs from a link of the arm, not from its base (a transform not recorded).
+        split = [r for r in self.tf.roots if r != root and self.tf.moving_frames(r)]
+        if split:
+            others = self.tf.moving_frames(split[0])
+            raise RecordingError(
+                f"the TF tree is split: image frame {camera!r} hangs from {root!r}, apart from "
+                f"the tree of {split[0]!r} (moving: {', '.join(others[:3])}); a transform "
+                f"joining them is missing from /tf or /tf_static; record it, or pass "
+                f"--base-frame {root} if {root!r} is the fixed base"
+            )
+        return root
 
     def _image_headers(self) -> tuple[_ImageHeaders, _ImageHeaders]:
         if self._headers is None:
@@ -582,14 +671,26 @@ class Recording:
             )
         c = np.asarray(color.stamps, dtype=np.int64)
         d = np.asarray(depth.stamps, dtype=np.int64)
+        repeated = _repeated_stamps(c)
+        if np.count_nonzero(repeated) > MAX_REPEATED_STAMPS * len(c):
+            raise RecordingError(
+                f"{np.count_nonzero(repeated) + 1} of {len(c)} colour images on {color.topic} "
+                f"share a header stamp ({int(c[np.argmax(repeated)])} ns): the driver did not "
+                "stamp each image with its capture time, so they cannot be posed; record with "
+                "per-image stamps"
+            )
         tolerance = round(self.config.sync_tolerance_s * 1e9)
         depth_index, paired = _pair_nearest(c, d, tolerance)
+        fresh = paired & ~repeated
 
         base, camera_frame = self.base_frame, self.camera_frame
-        T, in_range = self._poses(base, camera_frame, c[paired])
-        usable_color = np.flatnonzero(paired)[in_range]
+        T, in_range = self._poses(base, camera_frame, c[fresh])
+        usable_color = np.flatnonzero(fresh)[in_range]
+        if self.tf.is_static(base, camera_frame) and len(usable_color) > 1:
+            self._refuse_static_chain_if_images_move(base, camera_frame, usable_color)
         reasons = {
             "no_depth": int(np.count_nonzero(~paired)),
+            "duplicate_stamp": int(np.count_nonzero(paired & repeated)),
             "pose_out_of_range": int(np.count_nonzero(~in_range)),
         }
         used_depth = depth_index[usable_color]
@@ -604,6 +705,42 @@ class Recording:
             color_index=usable_color.astype(np.int64),
             depth_index=used_depth.astype(np.int64),
         )
+
+    def _refuse_static_chain_if_images_move(
+        self, base: str, camera_frame: str, color_index: NDArray[np.int64]
+    ) -> None:
+        """Every frame gets the same pose when no link between base and camera moves: right
+        for a fixed camera, wrong for a camera on the arm whose /tf was not recorded."""
+        spread = np.linspace(0, len(color_index) - 1, 4).round().astype(int)
+        picks = sorted({int(color_index[k]) for k in spread})
+        c = np.asarray(self._image_headers()[0].stamps, dtype=np.int64)[picks]
+        d = np.asarray(self._image_headers()[1].stamps, dtype=np.int64)
+        tolerance = round(self.config.sync_tolerance_s * 1e9)
+        depth_picks = sorted({int(i) for i in _pair_nearest(c, d, tolerance)[0]})
+        colors = [m.decode_color(*x) for x in self._pick(self.color_topic, picks)]
+        depths = [m.decode_depth(*x) for x in self._pick(self.depth_topic, depth_picks)]
+        if any(images_differ(colors[0], other) for other in colors[1:]) or any(
+            depths_differ(depths[0], other) for other in depths[1:]
+        ):
+            raise RecordingError(
+                f"the TF chain from {base!r} to image frame {camera_frame!r} has no time-varying "
+                "link (only /tf_static) but the images move: every frame would get one pose; "
+                "record /tf (the robot's joint transforms)"
+            )
+
+    def _pick(self, topic: str, indices: list[int]) -> list[tuple[Any, str]]:
+        """(message, msgtype) of the messages at ``indices`` (sorted) on ``topic``."""
+        out = []
+        stream = self.raw_messages([topic])
+        try:
+            for k, (_, msgtype, _, raw) in enumerate(stream):
+                if k in indices:
+                    out.append((self.deserialize(raw, msgtype), msgtype))
+                if k >= indices[-1]:
+                    break
+        finally:
+            stream.close()
+        return out
 
     def _check_first_images(self) -> None:
         """Decode the first colour and depth image: a topic of the wrong kind (a colour image
@@ -753,6 +890,46 @@ def _has_mcap_footer(path: Path) -> bool:
             return f.read() == _MCAP_MAGIC
     except OSError:
         return False
+
+
+#: Above this share of colour images sharing a stamp, stamps are not capture times at all.
+MAX_REPEATED_STAMPS = 0.1
+
+
+def _repeated_stamps(stamps: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """True for each stamp an earlier image already carries (the first of a group is kept:
+    a driver re-publishing a frame now and then is harmless)."""
+    order = np.argsort(stamps, kind="stable")
+    repeated = np.zeros(len(stamps), dtype=bool)
+    repeated[order[1:]] = stamps[order[1:]] == stamps[order[:-1]]
+    return repeated
+
+
+def images_differ(a: NDArray[np.uint8], b: NDArray[np.uint8]) -> bool:
+    """True if two (H, W, 3) uint8 colour images show different views: more than a quarter
+    of the pixels change by over 24 grey levels (sensor noise and flicker change a few)."""
+    if a.shape != b.shape:
+        return True
+    ga = a.astype(np.int16).sum(axis=2)
+    gb = b.astype(np.int16).sum(axis=2)
+    return float(np.mean(np.abs(ga - gb) > 3 * 24)) > 0.25
+
+
+def depths_differ(a: NDArray[np.float32], b: NDArray[np.float32]) -> bool:
+    """True if two (H, W) depth images (metres, NaN invalid) show different views: more than a
+    quarter of the pixels valid in both change by over 3 % of their depth or 10 mm (the D435i's
+    noise is under 1 % at wrist range), or validity itself changes over a quarter of them."""
+    if a.shape != b.shape:
+        return True
+    va, vb = np.isfinite(a), np.isfinite(b)
+    both = va & vb
+    if np.mean(va != vb) > 0.25:
+        return True
+    if not both.any():
+        return False
+    za, zb = a[both].astype(np.float64), b[both].astype(np.float64)
+    changed = np.abs(za - zb) > np.maximum(0.01, 0.03 * np.abs(za))
+    return float(np.mean(changed)) > 0.25
 
 
 def _pair_nearest(

@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 from scrapcut_cli.errors import RecordingError
+from scrapcut_cli.geometry import MAX_COORDINATE_M
 
 FloatArray = NDArray[np.float64]
 
@@ -66,8 +67,10 @@ class TfBuffer:
             raise RecordingError(f"TF transform from frame {child!r} to itself")
         t = np.asarray(translation, dtype=np.float64).reshape(3)
         q = np.asarray(quat_xyzw, dtype=np.float64).reshape(4)
-        norm = float(np.linalg.norm(q))
-        if not np.isfinite(norm) or norm < 1e-9 or not np.all(np.isfinite(t)):
+        # Bounded before any arithmetic: 1e300 would overflow the norm.
+        bounded = np.all(np.abs(t) <= MAX_COORDINATE_M) and np.all(np.abs(q) <= 1e6)
+        norm = float(np.sqrt(q @ q)) if bounded else 0.0
+        if not bounded or norm < 1e-9:
             raise RecordingError(f"TF transform {parent} -> {child} is not a valid pose: {t}, {q}")
         edge = self._edges.get(child)
         if edge is None:
@@ -125,6 +128,21 @@ class TfBuffer:
     def root(self, frame: str) -> str:
         """The root of the tree that holds ``frame``."""
         return self._path_to_root(frame)[-1]
+
+    @property
+    def roots(self) -> list[str]:
+        """The root of every tree in the buffer (frames without a parent), sorted."""
+        return sorted({self._path_to_root(f)[-1] for f in self._edges})
+
+    def moving_links(self, frame: str) -> list[tuple[str, str]]:
+        """(parent, child) of every time-varying (/tf) link between ``frame`` and its root,
+        nearest ``frame`` first; empty if ``frame`` is fixed to its root."""
+        path = self._path_to_root(frame)
+        return [(self._edges[c].parent, c) for c in path[:-1] if not self._edges[c].static]
+
+    def moving_frames(self, root: str) -> list[str]:
+        """Frames of the tree under ``root`` that move relative to it, sorted."""
+        return sorted(f for f in self._edges if self.root(f) == root and self.moving_links(f))
 
     def is_static(self, target_frame: str, source_frame: str) -> bool:
         """True if every link between the two frames comes from /tf_static."""

@@ -91,8 +91,11 @@ class McapWriter:
     ) -> None:
         if exc_type is None:
             self.close()
-        else:
-            self.abort(exc_type, exc, tb)
+            return
+        self.abort(exc_type, exc, tb)
+        if isinstance(exc, OSError) and exc.filename is None:
+            # A full disk while writing: name the output, not a bare errno.
+            raise OSError(exc.errno, exc.strerror, str(self.path)) from None
 
     def close(self) -> None:
         """Write the summary and footer and move the file onto ``path``."""
