@@ -34,6 +34,12 @@ _TMP_NAME = re.compile(r"\.(?P<name>.+)\.(?P<pid>\d+)\.[a-z0-9_]{8}\.tmp(\.[A-Za
 _swept: set[str] = set()
 
 
+def real_path(path: str | os.PathLike[str]) -> Path:
+    """``path`` with every link resolved, absolute; unlike ``Path.resolve`` (Python 3.11) it
+    does not raise on a symbolic link loop (the loop is reported where the path is opened)."""
+    return Path(os.path.realpath(path))
+
+
 def file_kind(mode: int) -> str:
     """What a stat mode describes, for messages ("a named pipe (FIFO)", "a folder"...)."""
     if stat.S_ISDIR(mode):
@@ -78,6 +84,26 @@ def check_input_file(path: str | os.PathLike[str], what: str = "input") -> Path:
     return path
 
 
+def read_text_input(
+    path: str | os.PathLike[str], what: str = "input", *, max_bytes: int = 1 << 28
+) -> str:
+    """The UTF-8 text of a regular file (a byte-order mark is dropped), or FileError naming
+    ``what``: missing, not a regular file, larger than ``max_bytes``, unreadable, not UTF-8."""
+    path = check_input_file(path, what)
+    try:
+        size = path.stat().st_size
+        if size > max_bytes:
+            raise FileError(f"{what} {path} is {size} bytes, more than a {what} holds")
+        data = path.read_bytes()
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise FileError(
+            f"{what} {path} is not UTF-8 text ({exc.reason} at byte {exc.start})"
+        ) from None
+    except OSError as exc:
+        raise FileError(f"cannot read {what} {path}: {exc.strerror or exc}") from None
+
+
 def check_output_path(target: str | os.PathLike[str], *, directory: bool = False) -> Path:
     """Where ``target`` really is (symbolic links followed), if it may be (re)written.
 
@@ -120,7 +146,7 @@ def atomic_path(
     target = check_output_path(target, directory=directory)
     parent = target.parent if str(target.parent) else Path(".")
     if directory and (
-        target.resolve() == parent.resolve() or target.resolve() in parent.resolve().parents
+        real_path(target) == real_path(parent) or real_path(target) in real_path(parent).parents
     ):
         # "." or ".." as a folder output: replacing it would delete the temporary inside it.
         raise ValueError(f"cannot replace {target}: it holds its own temporary")

@@ -856,13 +856,18 @@ def load_config(path: str | Path | None = None) -> ScrapcutConfig:
     config = ScrapcutConfig()
     if path is None:
         return config
+    from scrapcut_cli._io import read_text_input
+    from scrapcut_cli.errors import FileError
+
     path = Path(path)
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"configuration file not found: {path}") from None
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        data = tomllib.loads(read_text_input(path, "configuration file", max_bytes=1 << 24))
+    except FileError as exc:
+        raise ConfigError(str(exc)) from None
+    except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"cannot read configuration {path}: {exc}") from None
+    except RecursionError:
+        raise ConfigError(f"cannot read configuration {path}: nested too deep") from None
     return config_from_dict(data, where=str(path))
 
 

@@ -19,7 +19,6 @@ from helpers import (
     SyntheticScan,
     assert_same_frames,
     scan_T_base_cam,
-    scan_T_base_link8,
     synthetic_scan,
     tiny_recording,
     write_scan,
@@ -149,12 +148,17 @@ def test_sync_tolerance_controls_pairing(recordings: dict[str, Path]) -> None:
 
 
 def test_base_frame_option(recordings: dict[str, Path], scan: SyntheticScan) -> None:
-    frames = _frames(recordings["ros1"], RecordingConfig(base_frame="/panda_link8"))
+    frames = _frames(recordings["ros1"], RecordingConfig(base_frame="/panda_link0"))
     seconds = scan.seconds([f.stamp_ns for f in frames])
-    expected = np.linalg.inv(scan_T_base_link8(seconds)) @ scan_T_base_cam(seconds)
-    for frame, T in zip(frames, expected, strict=True):
-        assert frame.base_frame == "panda_link8"
+    for frame, T in zip(frames, scan_T_base_cam(seconds), strict=True):
+        assert frame.base_frame == "panda_link0"
         np.testing.assert_allclose(frame.T_base_cam, T, atol=1e-9)
+    # The flange moves during the scan: a path in its frame would be no path at all.
+    moving = r"--base-frame panda_link8 moves during the scan .*panda_link0 -> panda_link8"
+    flange = RecordingConfig(base_frame="panda_link8")
+    with open_recording(recordings["ros1"], flange) as rec, pytest.raises(RecordingError) as info:
+        rec.plan()
+    assert re.search(moving, str(info.value))
 
 
 def test_frames_stream_lazily(recordings: dict[str, Path]) -> None:

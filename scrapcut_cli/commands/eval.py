@@ -101,6 +101,10 @@ def eval_cmd(
                 param_hint="-o",
             )
     fmt = fmt or "table"
+    if output is not None:
+        from scrapcut_cli._io import check_output_path
+
+        check_output_path(output)
     config = build_config(config_path)
     config = config.override(
         "evaluation",

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from scrapcut_cli._io import real_path
 from scrapcut_cli.commands._options import (
     apply_stage_options,
     build_config,
@@ -84,14 +85,14 @@ def _check_output(output: Path, recording: Path) -> None:
         raise click.BadParameter(
             f"{output}: give a .mcap file or a folder name (no suffix)", param_hint="-o"
         )
-    if output.exists() and output.resolve() == recording.resolve():
+    if output.exists() and real_path(output) == real_path(recording):
         raise click.BadParameter(f"{output} is the recording itself", param_hint="-o")
     if output.suffix or not output.exists():
         return
     if not output.is_dir():
         raise click.BadParameter(f"{output} exists and is not a folder", param_hint="-o")
-    target = output.resolve()
-    if target == Path.cwd().resolve() or target in Path.cwd().resolve().parents:
+    target = real_path(output)
+    if target == real_path(Path.cwd()) or target in real_path(Path.cwd()).parents:
         raise click.BadParameter(f"{output} holds the current folder", param_hint="-o")
     foreign = sorted(p.name for p in output.iterdir() if not _PLY_NAME.fullmatch(p.name))
     if foreign:

@@ -8,6 +8,7 @@ from typing import Any
 
 import click
 
+from scrapcut_cli._io import check_output_path, real_path
 from scrapcut_cli.commands._options import (
     apply_stage_options,
     build_config,
@@ -194,14 +195,16 @@ def fit(
     extra = [p for p in (csv_path, mcap_path, nurbs_json) if p is not None]
     reports = [] if no_eval else list(error_report_paths(output))
     for target in [output, *extra, *reports]:
-        if target.resolve() == recording.resolve():
+        if real_path(target) == real_path(recording):
             raise click.UsageError(f"{target} would overwrite the recording; choose another -o")
-    if any(p.resolve() == output.resolve() for p in [*extra, *reports]):
+    if any(real_path(p) == real_path(output) for p in [*extra, *reports]):
         raise click.UsageError(f"-o {output} would be overwritten by an export; name it .json")
     if nurbs_json is not None and method != FitMethod.NURBS:
         raise click.UsageError("--nurbs-json needs --method nurbs")
     if no_eval and reference is not None:
         raise click.UsageError("--reference and --no-eval contradict each other")
+    for target in [output, *extra, *reports]:
+        check_output_path(target)  # before minutes of work: /dev/null, a FIFO, a link loop
 
     stage, shared = split_stage_options(shared)
     config = apply_stage_options(build_config(config_path, **shared), stage)

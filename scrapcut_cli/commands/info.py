@@ -66,6 +66,8 @@ def render(summary: RecordingSummary) -> None:
     overview.add_column(style="bold")
     overview.add_column()
     overview.add_row("format", summary.format)
+    if summary.salvaged:
+        overview.add_row("salvaged", escape(summary.salvaged))
     overview.add_row("duration", f"{summary.duration_s:.3f} s")
     reasons = ", ".join(f"{k} {v}" for k, v in sorted(plan.skip_reasons.items()))
     overview.add_row(

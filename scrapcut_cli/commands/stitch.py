@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from scrapcut_cli._io import check_output_path, real_path
 from scrapcut_cli.commands._options import (
     apply_stage_options,
     build_config,
@@ -158,8 +159,11 @@ def stitch(
 
     check_cloud_path(output, "-o")
     check_cloud_path(surface_path, "--surface")
-    if surface_path is not None and surface_path.resolve() == output.resolve():
+    if surface_path is not None and real_path(surface_path) == real_path(output):
         raise click.UsageError("--surface and -o name the same file")
+    for target in (output, surface_path):
+        if target is not None:
+            check_output_path(target)
     stage, shared = split_stage_options(options)
     config = apply_stage_options(build_config(config_path, **shared), stage)
 

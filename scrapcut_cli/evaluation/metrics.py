@@ -28,7 +28,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from scrapcut_cli.config import EvaluationConfig
 from scrapcut_cli.errors import EvaluationError
-from scrapcut_cli.geometry import PolylineDistance, cumulative_length, resample_polyline
+from scrapcut_cli.geometry import (
+    MAX_COORDINATE_M,
+    PolylineDistance,
+    cumulative_length,
+    resample_polyline,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -164,8 +169,10 @@ def _polyline(points: ArrayLike, what: str) -> FloatArray:
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise EvaluationError(f"{what} must be an (N, 3) array of points, got shape {pts.shape}")
-    if not np.isfinite(pts).all():
-        raise EvaluationError(f"{what} has non-finite coordinates")
+    if not (np.abs(pts) <= MAX_COORDINATE_M).all():  # also NaN
+        raise EvaluationError(
+            f"{what} has non-finite or implausible coordinates (beyond {MAX_COORDINATE_M:g} m)"
+        )
     if len(pts) < 2 or cumulative_length(pts)[-1] <= 0.0:
         raise EvaluationError(f"{what} needs at least two distinct points, got {len(pts)}")
     return pts

@@ -28,7 +28,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from scrapcut_cli.errors import EvaluationError
+from scrapcut_cli._io import read_text_input
+from scrapcut_cli.errors import EvaluationError, FileError
 from scrapcut_cli.evaluation.metrics import PathError
 
 if TYPE_CHECKING:
@@ -80,9 +81,9 @@ def load_paper_table(path: str | Path | None = None) -> PaperTable:
         where = "bundled paper_table1.csv"
     else:
         try:
-            text = Path(path).read_text(encoding="utf-8")
-        except OSError as exc:
-            raise EvaluationError(f"cannot read the paper table {path}: {exc}") from None
+            text = read_text_input(path, "paper table", max_bytes=1 << 24)
+        except FileError as exc:
+            raise EvaluationError(f"cannot read the paper table: {exc}") from None
         where = str(path)
     rows = list(csv.DictReader(io.StringIO(text)))
     needed = {"object", "method", *TABLE1_FIELDS}

@@ -16,11 +16,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from scrapcut_cli._io import check_input_file, real_path
 from scrapcut_cli.config import EvaluationConfig, RecordingConfig, ScanMode
-from scrapcut_cli.errors import EvaluationError, ScrapcutError, ToolpathError
+from scrapcut_cli.errors import EvaluationError, FileError, ScrapcutError, ToolpathError
 from scrapcut_cli.evaluation.metrics import path_error
 from scrapcut_cli.evaluation.report import ReportRow
 from scrapcut_cli.fitting.curve import Curve
+from scrapcut_cli.geometry import MAX_COORDINATE_M
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,13 +46,15 @@ class Reference:
     """A painted reference curve: ``points`` (M, 3) float64, metres, base frame, ordered.
 
     ``object`` is the simulated object's name when the recording says it; ``origin`` the file;
-    ``metadata`` the recording's simulator settings (``object``, ``mode``, ``seed``...).
+    ``metadata`` the recording's simulator settings (``object``, ``mode``, ``seed``...);
+    ``frame_id`` the frame of the points when known (a recording's; a CSV names none).
     """
 
     points: NDArray[np.float64]
     origin: Path
     object: str | None = None
     metadata: dict[str, Any] = field(default_factory=dict)
+    frame_id: str | None = None
 
     @property
     def oracle_views(self) -> bool:
@@ -109,6 +113,7 @@ def read_reference_csv(path: str | Path) -> NDArray[np.float64]:
     """(M, 3) reference points from a CSV with header ``x,y,z`` (metres, base frame)."""
     path = Path(path)
     try:
+        check_input_file(path, "reference CSV")
         # utf-8-sig: a spreadsheet's export starts with a byte-order mark.
         with path.open(encoding="utf-8-sig") as f:
             header = [h.strip().lower() for h in f.readline().split(",")]
@@ -116,19 +121,21 @@ def read_reference_csv(path: str | Path) -> NDArray[np.float64]:
                 # A header without rows is reported below (one line), not warned about.
                 warnings.simplefilter("ignore", UserWarning)
                 rows = np.loadtxt(f, delimiter=",", dtype=np.float64, ndmin=2)
-    except FileNotFoundError:
-        raise EvaluationError(f"reference not found: {path}") from None
+    except FileError as exc:
+        if "not found" in str(exc):
+            raise EvaluationError(f"reference not found: {path}") from None
+        raise EvaluationError(str(exc)) from None
     except (OSError, UnicodeDecodeError, ValueError) as exc:
         raise EvaluationError(f"cannot read reference CSV {path}: {exc}") from None
     if header[:3] != ["x", "y", "z"]:
         raise EvaluationError(f"reference CSV {path} must start with the header x,y,z (metres)")
     if rows.shape[0] < 2 or rows.shape[1] < 3:
         raise EvaluationError(f"reference CSV {path} needs at least two rows of x,y,z")
-    bad = np.flatnonzero(~np.isfinite(rows[:, :3]).all(axis=1))
+    bad = np.flatnonzero(~(np.abs(rows[:, :3]) <= MAX_COORDINATE_M).all(axis=1))
     if len(bad):
         raise EvaluationError(
-            f"reference CSV {path}: {len(bad)} row(s) with NaN or infinite coordinates "
-            f"(first: line {int(bad[0]) + 2})"
+            f"reference CSV {path}: {len(bad)} row(s) with NaN or infinite coordinates or "
+            f"beyond {MAX_COORDINATE_M:g} m (first: line {int(bad[0]) + 2})"
         )
     return np.ascontiguousarray(rows[:, :3])
 
@@ -156,16 +163,17 @@ def recording_reference(
     from scrapcut_cli.recording.reader import open_recording
 
     with open_recording(path, config) as rec:
-        points = rec.reference()
+        found = rec.reference_in_frame()
         metadata = dict(rec.metadata.get("scrapcut", {}))
-    if points is None or len(points) < 2:
+    if found is None or len(found[0]) < 2:
         return None
     name = metadata.get("object")
     return Reference(
-        points=np.asarray(points, dtype=np.float64),
+        points=np.asarray(found[0], dtype=np.float64),
         origin=path,
         object=str(name) if name else None,
         metadata=metadata,
+        frame_id=found[1] or None,
     )
 
 
@@ -212,7 +220,7 @@ def evaluate_path_files(
         if shared is not None:
             ref = shared
         else:
-            origin = resolve_source(path_file).resolve()
+            origin = real_path(resolve_source(path_file))
             if origin not in cache:
                 cache[origin] = load_reference(origin, config=recording_config)
             ref = cache[origin]
@@ -228,7 +236,18 @@ def evaluate_path_file(
     object_name: str | None = None,
     note: str = "",
 ) -> ReportRow:
-    """One report row: ``path_file``'s curve against ``reference``."""
+    """One report row: ``path_file``'s curve against ``reference``.
+
+    Raises EvaluationError when the two are in different frames (each known): distances
+    between a path in ``panda_link4`` and a reference in ``panda_link0`` mean nothing.
+    """
+    if reference.frame_id and path_file.frame_id and reference.frame_id != path_file.frame_id:
+        raise EvaluationError(
+            f"{path_file.path} is in frame {path_file.frame_id!r} but the reference from "
+            f"{reference.origin} is in {reference.frame_id!r}; they cannot be compared (fit "
+            f"again with --base-frame {reference.frame_id}, or give a reference in "
+            f"{path_file.frame_id!r})"
+        )
     try:
         error = path_error(path_file.curve_points, reference.points, config=config)
     except ScrapcutError as exc:

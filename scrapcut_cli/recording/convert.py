@@ -16,7 +16,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from scrapcut_cli._io import atomic_path
+from scrapcut_cli._io import atomic_path, check_output_path, real_path
 from scrapcut_cli.errors import RecordingError
 from scrapcut_cli.recording import messages as m
 from scrapcut_cli.recording.reader import (
@@ -57,7 +57,16 @@ def convert_recording(
             f"unknown ROS 2 storage {storage!r}; known: {', '.join(ROS2_STORAGES)}"
         )
     src_path, dst_path = Path(src), Path(dst)
-    if dst_path.exists() and src_path.exists() and dst_path.resolve() == src_path.resolve():
+    suffix = {"mcap": ".mcap", "ros1": ".bag"}.get(fmt)
+    if suffix is not None and dst_path.suffix.lower() != suffix:
+        # Readers (ours, rosbags, ros2 bag) tell a file's format by its name: a mismatch
+        # would write a file nothing opens.
+        kind = {"mcap": "an MCAP file", "ros1": "a ROS 1 bag"}[fmt]
+        raise RecordingError(
+            f"{kind} must be named *{suffix}, not {dst_path.name!r}; "
+            f"use -o {dst_path.with_suffix(suffix).name}"
+        )
+    if dst_path.exists() and src_path.exists() and real_path(dst_path) == real_path(src_path):
         raise RecordingError(f"output {dst_path} is the input; choose another -o")
     if fmt == "ros2" and dst_path.is_file():
         raise RecordingError(f"{dst_path} is a file; a ROS 2 bag is a directory")
@@ -69,6 +78,7 @@ def convert_recording(
         )
     if fmt != "ros2" and dst_path.is_dir():
         raise RecordingError(f"{dst_path} is a directory; an {fmt} recording is a file")
+    check_output_path(dst_path, directory=fmt == "ros2")
     with open_recording(src_path) as rec:
         translate = _Translator(rec, to_ros1=fmt == "ros1")
         if fmt == "mcap":

@@ -6,12 +6,16 @@ This module imports only numpy, so perception, fitting and the simulator can use
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 DISTORTION_MODELS = ("none", "plumb_bob", "rational_polynomial", "equidistant")
+#: No RGB-D camera has an image side over 16384 px (8K colour is 7680); a larger size is a
+#: damaged CameraInfo, and per-pixel arrays of it would not fit in memory.
+MAX_IMAGE_SIDE = 16384
 
 
 @dataclass(frozen=True)
@@ -34,8 +38,16 @@ class CameraModel:
     frame_id: str = ""
 
     def __post_init__(self) -> None:
-        if self.width <= 0 or self.height <= 0:
-            raise ValueError(f"camera size must be positive, got {self.width}x{self.height}")
+        if not (0 < self.width <= MAX_IMAGE_SIDE and 0 < self.height <= MAX_IMAGE_SIDE):
+            raise ValueError(
+                f"camera size must be 1-{MAX_IMAGE_SIDE} px a side, got {self.width}x{self.height}"
+            )
+        numbers = (self.fx, self.fy, self.cx, self.cy, *self.distortion)
+        if not all(math.isfinite(v) and abs(v) < 1e9 for v in numbers):
+            raise ValueError(
+                f"intrinsics must be finite, got fx={self.fx} fy={self.fy} cx={self.cx} "
+                f"cy={self.cy} distortion={self.distortion}"
+            )
         if self.fx <= 0 or self.fy <= 0:
             raise ValueError(f"focal lengths must be positive, got fx={self.fx} fy={self.fy}")
         if self.distortion_model not in DISTORTION_MODELS:

@@ -845,6 +845,11 @@ class Recording:
         Read from the last ``nav_msgs/Path`` on /scrapcut/reference; a path expressed in
         another TF frame is transformed into the base frame (``--base-frame`` or its TF root).
         """
+        found = self.reference_in_frame()
+        return None if found is None else found[0]
+
+    def reference_in_frame(self) -> tuple[NDArray[np.float64], str] | None:
+        """:meth:`reference` and the frame its points are in ("" if the message names none)."""
         if REFERENCE_TOPIC not in self._connections:
             return None
         last = None
@@ -854,17 +859,17 @@ class Recording:
             return None
         stamp, msg = last
         points = m.path_points(msg)
-        frame = m.frame_id_of(msg)
+        frame = m.frame_id_of(msg).lstrip("/")
         wanted = (self.config.base_frame or "").lstrip("/")
         if not frame or frame == wanted:  # already in the base frame: no need to read /tf
-            return points
+            return points, frame
         if not self.tf.has_frame(frame):
-            return points
+            return points, frame
         base = wanted or self.tf.root(frame)
         if base == frame:
-            return points
+            return points, frame
         T = self.tf.lookup_one(base, frame, stamp)
-        return transform_points(T, points)
+        return transform_points(T, points), base
 
     def exploration_log(self) -> list[dict[str, Any]]:
         """The simulator's exploration steps: one JSON object per /scrapcut/exploration message."""
@@ -874,7 +879,7 @@ class Recording:
         for _, _, msg in self.messages([EXPLORATION_TOPIC]):
             try:
                 step = json.loads(str(msg.data))
-            except json.JSONDecodeError as exc:
+            except (json.JSONDecodeError, RecursionError) as exc:
                 raise RecordingError(f"{EXPLORATION_TOPIC} holds invalid JSON: {exc}") from None
             if not isinstance(step, dict):
                 raise RecordingError(f"{EXPLORATION_TOPIC} messages must be JSON objects")
@@ -960,7 +965,7 @@ def _frames_text(tf: TfBuffer) -> str:
 def _json_object(text: str, where: str) -> dict[str, Any]:
     try:
         data = json.loads(text)
-    except json.JSONDecodeError as exc:
+    except (json.JSONDecodeError, RecursionError) as exc:
         raise RecordingError(f"{where} holds invalid JSON: {exc}") from None
     if not isinstance(data, dict):
         raise RecordingError(f"{where} must hold a JSON object, got {type(data).__name__}")

@@ -38,6 +38,7 @@ class RecordingSummary:
     has_reference: bool
     has_exploration_log: bool
     metadata: dict[str, dict[str, str]]
+    salvaged: str | None = None  # what --salvage kept of a damaged MCAP
 
     def to_json(self) -> dict[str, Any]:
         """The fixed keys of DESIGN.md (``format`` ... ``has_exploration_log``) plus extras."""
@@ -78,6 +79,7 @@ class RecordingSummary:
                 None if self.pose_time_range_ns is None else list(self.pose_time_range_ns)
             ),
             "metadata": self.metadata,
+            "salvaged": self.salvaged,
         }
 
 
@@ -106,4 +108,5 @@ def summarize_recording(
             has_reference=counts.get(REFERENCE_TOPIC, 0) > 0,
             has_exploration_log=counts.get(EXPLORATION_TOPIC, 0) > 0,
             metadata=rec.metadata,
+            salvaged=None if rec.salvaged is None else rec.salvaged.describe(),
         )

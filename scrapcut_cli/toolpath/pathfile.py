@@ -26,8 +26,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from scrapcut_cli import __version__
-from scrapcut_cli._io import atomic_path, write_text_atomic
-from scrapcut_cli.errors import ToolpathError
+from scrapcut_cli._io import atomic_path, read_text_input, write_text_atomic
+from scrapcut_cli.errors import FileError, ToolpathError
 from scrapcut_cli.fitting.curve import Curve, NurbsModel
 from scrapcut_cli.geometry import polyline_length, quat_xyzw_to_matrix
 from scrapcut_cli.toolpath.path import CuttingPath
@@ -204,11 +204,13 @@ def read_path_file(source: str | Path) -> tuple[Curve, CuttingPath, dict[str, An
     """Read and validate a path file (see :func:`path_from_dict`)."""
     source = Path(source)
     try:
-        data = json.loads(source.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ToolpathError(f"path file not found: {source}") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        data = json.loads(read_text_input(source, "path file"))
+    except FileError as exc:
+        raise ToolpathError(str(exc)) from None
+    except json.JSONDecodeError as exc:
         raise ToolpathError(f"cannot read path file {source}: {exc}") from None
+    except RecursionError:  # json nests by recursion: 100,000 brackets exhaust the stack
+        raise ToolpathError(f"cannot read path file {source}: JSON nested too deep") from None
     try:
         return path_from_dict(data)
     except ToolpathError as exc:

@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from scrapcut_cli.errors import ToolpathError
+from scrapcut_cli._io import read_text_input
+from scrapcut_cli.errors import FileError, ToolpathError
 
 #: Package-data name of the bundled table.
 BUNDLED_TABLE = "cutting_speeds.csv"
@@ -109,11 +110,9 @@ def load_speed_table(path: str | Path | None = None) -> SpeedTable:
     else:
         source = str(path)
         try:
-            text = Path(path).read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise ToolpathError(f"speed table not found: {path}") from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ToolpathError(f"cannot read speed table {path}: {exc}") from None
+            text = read_text_input(path, "speed table", max_bytes=1 << 24)
+        except FileError as exc:
+            raise ToolpathError(str(exc)) from None
     return parse_speed_table(text, source=source)
 
 
