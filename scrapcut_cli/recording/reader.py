@@ -380,7 +380,8 @@ class Recording:
             with self._source.open("rb") as f:
                 return {md.name: dict(md.metadata) for md in make_reader(f).iter_metadata()}
         except (McapError, Exception) as exc:  # a damaged metadata record, whatever it raises
-            raise RecordingError(f"cannot read the metadata of {self.path}: {exc}") from None
+            text = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+            raise RecordingError(f"cannot read the metadata of {self.path}: {text}") from None
 
     def _custom_data_metadata(self) -> dict[str, dict[str, str]]:
         storage = getattr(self._reader.readers[0], "storage", None)

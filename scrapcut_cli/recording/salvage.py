@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import IO, Any, cast
 
 from scrapcut_cli.errors import RecordingError
 
@@ -42,8 +42,8 @@ def salvage_mcap(source: str | os.PathLike[str], target: str | os.PathLike[str])
 
     Raises RecordingError if not even the header and one message could be read.
     """
-    from mcap.records import Channel, Message, Metadata, Schema
-    from mcap.stream_reader import StreamReader
+    from mcap.records import Channel, Chunk, Message, Metadata, Schema
+    from mcap.stream_reader import StreamReader, breakup_chunk
     from mcap.writer import CompressionType, Writer
 
     source, target = Path(source), Path(target)
@@ -52,13 +52,18 @@ def salvage_mcap(source: str | os.PathLike[str], target: str | os.PathLike[str])
     stopped: str | None = None
     schema_ids: dict[int, int] = {}
     channel_ids: dict[int, int] = {}
-    with source.open("rb") as f, target.open("wb") as out:
+    with source.open("rb") as raw, target.open("wb") as out:
+        f = _Bounded(raw, total)
         writer = Writer(out, compression=CompressionType.NONE)
         writer.start(profile="ros2", library="scrapcut salvage")
-        reader = StreamReader(f, validate_crcs=True, record_size_limit=total)
+        # Chunks are opened here, after their claimed size is checked: the mcap library would
+        # allocate whatever a damaged size field says.
+        reader = StreamReader(
+            cast(IO[bytes], f), validate_crcs=True, record_size_limit=total, emit_chunks=True
+        )
         position = 0
         try:
-            for record in reader.records:
+            for record in _unchunked(reader.records, Chunk, breakup_chunk):
                 if isinstance(record, Schema):
                     if record.id not in schema_ids:
                         schema_ids[record.id] = writer.register_schema(
@@ -84,7 +89,7 @@ def salvage_mcap(source: str | os.PathLike[str], target: str | os.PathLike[str])
                         messages += 1
                 elif isinstance(record, Metadata):
                     writer.add_metadata(record.name, dict(record.metadata))
-                position = f.tell()
+                position = raw.tell()
         except Exception as exc:  # whatever the damage looks like, stop there
             stopped = _reason(exc)
         writer.finish()
@@ -93,6 +98,40 @@ def salvage_mcap(source: str | os.PathLike[str], target: str | os.PathLike[str])
             f"nothing could be salvaged from {source}: {stopped or 'it holds no messages'}"
         )
     return SalvageReport(messages, position, total, stopped)
+
+
+#: No recorder writes chunks this large (they write KiB to a few MiB).
+MAX_CHUNK_BYTES = 1 << 28
+
+
+class _Bounded:
+    """A binary file whose reads never ask for more than the file holds: the mcap library
+    sizes its buffers by the length fields it reads, damaged or not."""
+
+    def __init__(self, f: Any, size: int) -> None:
+        self.f, self.size = f, size
+
+    def read(self, n: int = -1) -> bytes:
+        left = max(self.size - self.f.tell(), 0)
+        return bytes(self.f.read(left if n is None or n < 0 else min(n, left)))
+
+    def tell(self) -> int:
+        return int(self.f.tell())
+
+
+def _unchunked(records: Any, chunk_type: type, breakup: Any) -> Any:
+    """Records with each chunk replaced by its records, once its claimed size is checked."""
+    for record in records:
+        if isinstance(record, chunk_type):
+            size = int(record.uncompressed_size)  # type: ignore[attr-defined]
+            compression = record.compression  # type: ignore[attr-defined]
+            if size > MAX_CHUNK_BYTES or compression not in ("", "zstd", "lz4"):
+                raise ValueError(f"a chunk claims {size} bytes ({compression or 'plain'})")
+            if compression == "" and size != len(record.data):  # type: ignore[attr-defined]
+                raise ValueError("a chunk's size disagrees with its data")
+            yield from breakup(record, validate_crc=True)
+        else:
+            yield record
 
 
 def _reason(exc: Any) -> str:
