@@ -406,3 +406,67 @@ def colour_filled(rgb: tuple[int, int, int]) -> Edit:
         return msg
 
     return edit
+
+
+# --------------------------------------------------------------------------- a tiny arm scan
+
+ARM_COLOR_TOPIC = "/camera/camera/color/image_raw"
+ARM_DEPTH_TOPIC = "/camera/camera/aligned_depth_to_color/image_raw"
+ARM_INFO_TOPIC = "/camera/camera/color/camera_info"
+
+
+def arm_scan(
+    path: Path,
+    *,
+    drop_link: str | None = None,
+    with_tf: bool = True,
+    same_stamp: bool = False,
+    nan_intrinsics: bool = False,
+    frames: int = 4,
+) -> Path:
+    """A tiny eye-in-hand scan as a robot records it: base -> link1 -> link2 move (/tf at
+    100 Hz), link2 -> cam is the hand-eye calibration (/tf_static); ``frames`` 32 x 24 colour
+    and depth images that change as the camera moves.
+
+    Faults on request: a /tf link never recorded (``drop_link``), no /tf at all
+    (``with_tf=False``), every image stamped alike (``same_stamp``), NaN focal lengths.
+    """
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    from scrapcut_cli.recording import messages as m
+    from scrapcut_cli.recording.frame import CameraModel
+    from scrapcut_cli.recording.writer import McapWriter
+
+    rng = np.random.default_rng(7)
+    t0 = 1_700_000_000_000_000_000
+    camera = CameraModel(32, 24, 28.0, 28.0, 15.5, 11.5, frame_id="cam")
+    stamps = [t0 + k * 33_333_333 for k in range(frames)]
+    with McapWriter(path) as writer:
+        writer.write_tf(t0 - 50_000_000, [("link2", "cam", np.eye(4))], static=True)
+        info = m.camera_info_msg(t0, camera)
+        if nan_intrinsics:
+            info.k = np.array([np.nan, 0, 15.5, 0, np.nan, 11.5, 0, 0, 1], dtype=np.float64)
+        writer.write_message(ARM_INFO_TOPIC, m.CAMERA_INFO, info, log_time_ns=t0 - 40_000_000)
+        items: list[tuple[int, str, Any]] = []
+        if with_tf:
+            for stamp in range(t0 - 20_000_000, stamps[-1] + 30_000_000, 10_000_000):
+                t = (stamp - t0) / 1e9
+                link1 = np.eye(4)
+                link1[:3, :3] = Rotation.from_euler("z", 0.5 * t).as_matrix()
+                link2 = np.eye(4)
+                link2[:3, 3] = [0.3 + 0.2 * t, 0.0, 0.4]
+                links = [("base", "link1", link1), ("link1", "link2", link2)]
+                items.append((stamp, "tf", [x for x in links if x[1] != drop_link]))
+        for k, stamp in enumerate(stamps):
+            rgb = rng.integers(0, 256, (24, 32, 3), dtype=np.uint8)
+            depth = rng.integers(300, 900, (24, 32)).astype(np.uint16)
+            items.append((stamp, "image", (t0 if same_stamp else stamp, rgb, depth)))
+        for log_time, kind, payload in sorted(items, key=lambda item: item[0]):
+            if kind == "tf":
+                writer.write_tf(log_time, payload)
+            else:
+                stamp, rgb, depth = payload
+                writer.write_image(ARM_COLOR_TOPIC, stamp, "cam", rgb, log_time_ns=log_time)
+                writer.write_image(ARM_DEPTH_TOPIC, stamp, "cam", depth, log_time_ns=log_time)
+    return path

@@ -889,9 +889,12 @@ class Recording:
 
 
 def _has_mcap_footer(path: Path) -> bool:
-    """True if the file ends with the MCAP magic (a complete file; False if unreadable)."""
+    """True if the file ends with a footer and the MCAP magic (False if unreadable): the magic
+    alone, as a recorder killed at once leaves it, is no complete file."""
     try:
         with path.open("rb") as f:
+            if f.seek(0, os.SEEK_END) < 2 * len(_MCAP_MAGIC) + 29:  # magic, footer, magic
+                return False
             f.seek(-len(_MCAP_MAGIC), os.SEEK_END)
             return f.read() == _MCAP_MAGIC
     except OSError:
