@@ -63,7 +63,12 @@ def _worker(conn: Any, memory_gb: float) -> None:
     resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
     warnings.simplefilter("ignore", RuntimeWarning)  # as cli.main
     runner = CliRunner()
+    parent = os.getppid()
     while True:
+        if not conn.poll(5.0):
+            if os.getppid() != parent:  # the campaign was killed: do not linger
+                return
+            continue
         task = conn.recv()
         if task is None:
             return
