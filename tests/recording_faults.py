@@ -458,7 +458,7 @@ def arm_scan(
                 link2[:3, 3] = [0.3 + 0.2 * t, 0.0, 0.4]
                 links = [("base", "link1", link1), ("link1", "link2", link2)]
                 items.append((stamp, "tf", [x for x in links if x[1] != drop_link]))
-        for k, stamp in enumerate(stamps):
+        for stamp in stamps:
             rgb = rng.integers(0, 256, (24, 32, 3), dtype=np.uint8)
             depth = rng.integers(300, 900, (24, 32)).astype(np.uint16)
             items.append((stamp, "image", (t0 if same_stamp else stamp, rgb, depth)))

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from scrapcut_cli._io import real_path
 from scrapcut_cli.commands._options import (
     bounded,
     build_config,
@@ -173,7 +174,7 @@ def explore(
         )
     if no_eval and reference is not None:
         raise click.UsageError("--reference and --no-eval contradict each other")
-    if output is not None and output.resolve() == recording.resolve():
+    if output is not None and real_path(output) == real_path(recording):
         raise click.UsageError(f"{output} would overwrite the recording; choose another -o")
     config = build_config(config_path, **shared)
     check_reference_given(reference)
