@@ -281,7 +281,7 @@ class Recording:
         from rosbags.rosbag1 import ReaderError as Reader1Error
         from rosbags.rosbag2 import ReaderError as Reader2Error
 
-        text = str(exc).strip()
+        text = one_line(str(exc))
         if not isinstance(exc, Reader1Error | Reader2Error) or not text:
             text = f"{type(exc).__name__}: {text}" if text else type(exc).__name__
         hint = {
@@ -289,10 +289,10 @@ class Recording:
             "ros1": "try `rosbag reindex`",
             "ros2": "try `ros2 bag reindex`",
         }[self.format]
-        return f"damaged recording {self.path}: {text[:300]} ({hint})"
+        return f"damaged recording {self.path}: {text} ({hint})"
 
     def _open_error(self, exc: BaseException) -> str:
-        reason = str(exc).strip() or type(exc).__name__
+        reason = one_line(str(exc)) or type(exc).__name__
         mcap_file = self.path
         if self.format == "ros2" and self.path.is_dir():
             storage = sorted(self.path.glob("*.mcap"), key=_split_number)
@@ -380,7 +380,7 @@ class Recording:
             with self._source.open("rb") as f:
                 return {md.name: dict(md.metadata) for md in make_reader(f).iter_metadata()}
         except (McapError, Exception) as exc:  # a damaged metadata record, whatever it raises
-            text = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+            text = one_line(f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__)
             raise RecordingError(f"cannot read the metadata of {self.path}: {text}") from None
 
     def _custom_data_metadata(self) -> dict[str, dict[str, str]]:
@@ -479,7 +479,7 @@ class Recording:
         try:
             return self._reader.deserialize(bytes(raw), msgtype)
         except Exception as exc:  # a damaged payload, whatever the deserialiser raises
-            text = str(exc).strip()[:200] or type(exc).__name__
+            text = one_line(str(exc), 200) or type(exc).__name__
             raise RecordingError(
                 f"damaged recording {self.path}: cannot decode a {msgtype} message ({text})"
             ) from None
@@ -899,6 +899,13 @@ def _has_mcap_footer(path: Path) -> bool:
             return f.read() == _MCAP_MAGIC
     except OSError:
         return False
+
+
+def one_line(text: str, limit: int = 300) -> str:
+    """A library's message as one line of at most ``limit`` characters (rosbags quotes whole
+    message definitions, over several lines, in its parse errors)."""
+    flat = " ".join(text.split())
+    return flat if len(flat) <= limit else flat[: limit - 3] + "..."
 
 
 #: Above this share of colour images sharing a stamp, stamps are not capture times at all.

@@ -135,7 +135,7 @@ def _unchunked(records: Any, chunk_type: type, breakup: Any) -> Any:
 
 
 def _reason(exc: Any) -> str:
-    text = str(exc).strip()
+    text = " ".join(str(exc).split())
     name = type(exc).__name__
     if "EndOfFile" in name or not text:
         return "the file ends inside a record" if "EndOfFile" in name else name

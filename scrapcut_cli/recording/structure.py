@@ -156,8 +156,11 @@ def _walk_mcap_records(r: _Reader, layout: McapLayout, pos: int) -> int:
             return pos + 29
         if opcode == _CHUNK:
             _check_chunk_header(r, layout, pos, length)
-        elif opcode in (_SCHEMA, _CHANNEL) and length <= 1 << 24:
-            _check_schema_or_channel(r.read(pos + 9, length, "record"), opcode, pos)
+        elif opcode in _FIELDS:
+            # Strings, maps and arrays inside a record must fit in it: the mcap library reads
+            # them from the file with the lengths they state. Large payloads (attachments,
+            # messages) are checked from their head, their data by its declared length.
+            _check_fields(r.read(pos + 9, min(length, 1 << 20), "record"), opcode, pos, length)
         pos += 9 + length
         layout.end_of_records = pos
     return pos
@@ -183,6 +186,62 @@ def _check_chunk_header(r: _Reader, layout: McapLayout, pos: int, length: int) -
     if uncompressed > MAX_CHUNK_BYTES or (compression == "" and uncompressed != records_len):
         raise Damaged(f"the chunk at byte {pos} claims {uncompressed} bytes uncompressed")
     layout.chunks[pos] = (records_len, uncompressed, compression)
+
+
+#: The layout of each MCAP record: B/H/I/Q fixed integers, s a u32-prefixed string, b a
+#: u32-prefixed byte array, d a u64-prefixed byte array, m a u32-byte-length map of strings,
+#: a a u32-byte-length array of (u64, u64). A record may hold more (later spec versions).
+_FIELDS = {
+    _HEADER: "ss",
+    _SCHEMA: "Hssb",
+    _CHANNEL: "HHssm",
+    _MESSAGE: "HIQQ",
+    _MESSAGE_INDEX: "Ha",
+    _ATTACHMENT: "QQssd",
+    _ATTACHMENT_INDEX: "QQQQQss",
+    _METADATA: "sm",
+    _METADATA_INDEX: "QQs",
+    _DATA_END: "I",
+}
+_FIXED = {"B": 1, "H": 2, "I": 4, "Q": 8}
+
+
+def _check_fields(head: bytes, opcode: int, pos: int, length: int) -> None:
+    """Every length-prefixed field of the record at ``pos`` ends inside it (``head``: its first
+    bytes, the whole record unless it is over 1 MiB)."""
+    k = 0
+    for kind in _FIELDS[opcode]:
+        if kind in _FIXED:
+            k += _FIXED[kind]
+            if k > length:
+                raise Damaged(f"record 0x{opcode:02x} at byte {pos} is too short for its fields")
+            continue
+        width = 8 if kind == "d" else 4
+        if k + width > len(head):
+            raise Damaged(f"record 0x{opcode:02x} at byte {pos} is cut off inside a field")
+        (n,) = _u("Q" if width == 8 else "I", head, k)
+        k += width + n
+        if k > length:
+            raise Damaged(
+                f"a field of record 0x{opcode:02x} at byte {pos} claims {n} bytes, more than "
+                "its record holds"
+            )
+        if kind == "m" and k <= len(head):
+            _check_string_map(head[k - n : k], opcode, pos)
+    if opcode == _SCHEMA and length <= len(head):
+        _check_schema_or_channel(head, opcode, pos)
+
+
+def _check_string_map(data: bytes, opcode: int, pos: int) -> None:
+    k = 0
+    while k < len(data):
+        for _ in range(2):  # key, value
+            if k + 4 > len(data):
+                raise Damaged(f"a map in record 0x{opcode:02x} at byte {pos} is cut off")
+            (n,) = _u("I", data, k)
+            k += 4 + n
+            if k > len(data):
+                raise Damaged(f"a map entry in record 0x{opcode:02x} at byte {pos} overruns it")
 
 
 def _check_schema_or_channel(content: bytes, opcode: int, pos: int) -> None:
@@ -227,8 +286,8 @@ def _check_mcap_summary(r: _Reader, layout: McapLayout) -> None:
                 (n,) = _u("I", content, 42)
                 if 46 + n != len(content) or n % 10:
                     raise Damaged(f"the statistics at byte {pos} do not fit their record")
-            elif opcode in (_SCHEMA, _CHANNEL):
-                _check_schema_or_channel(content, opcode, pos)
+            elif opcode in _FIELDS:
+                _check_fields(content, opcode, pos, length)
         except struct.error:
             raise Damaged(f"summary record 0x{opcode:02x} at byte {pos} is cut off") from None
 
