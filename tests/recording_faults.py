@@ -423,13 +423,15 @@ def arm_scan(
     same_stamp: bool = False,
     nan_intrinsics: bool = False,
     frames: int = 4,
+    repeat_frame: int | None = None,
 ) -> Path:
     """A tiny eye-in-hand scan as a robot records it: base -> link1 -> link2 move (/tf at
     100 Hz), link2 -> cam is the hand-eye calibration (/tf_static); ``frames`` 32 x 24 colour
     and depth images that change as the camera moves.
 
     Faults on request: a /tf link never recorded (``drop_link``), no /tf at all
-    (``with_tf=False``), every image stamped alike (``same_stamp``), NaN focal lengths.
+    (``with_tf=False``), every image stamped alike (``same_stamp``), NaN focal lengths, image
+    ``repeat_frame`` stamped as the one before it (a driver re-publishing a frame).
     """
     import numpy as np
     from scipy.spatial.transform import Rotation
@@ -442,6 +444,8 @@ def arm_scan(
     t0 = 1_700_000_000_000_000_000
     camera = CameraModel(32, 24, 28.0, 28.0, 15.5, 11.5, frame_id="cam")
     stamps = [t0 + k * 33_333_333 for k in range(frames)]
+    if repeat_frame is not None:
+        stamps[repeat_frame] = stamps[repeat_frame - 1]
     with McapWriter(path) as writer:
         writer.write_tf(t0 - 50_000_000, [("link2", "cam", np.eye(4))], static=True)
         info = m.camera_info_msg(t0, camera)

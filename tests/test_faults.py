@@ -17,7 +17,6 @@ import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
-import numpy as np
 import pytest
 from click.testing import CliRunner
 from helpers import one_line_error, synthetic_scan, write_scan
@@ -72,11 +71,11 @@ def test_a_base_frame_that_moves_is_refused_and_names_the_fixed_one(tmp_path: Pa
 
 def test_a_few_repeated_stamps_are_skipped_and_counted(tmp_path: Path) -> None:
     """A driver re-publishing a frame now and then: the copy is skipped, not fatal."""
-    from scrapcut_cli.recording.reader import MAX_REPEATED_STAMPS, _repeated_stamps
-
-    stamps = np.array([5, 7, 7, 9, 11, 13, 15, 17, 19, 21, 23], dtype=np.int64)
-    assert _repeated_stamps(stamps).tolist() == [False, False, True] + [False] * 8
-    assert 1 / len(stamps) <= MAX_REPEATED_STAMPS
+    rec = arm_scan(tmp_path / "scan.mcap", frames=12, repeat_frame=5)
+    result = run("info", rec, "--json")
+    assert result.exit_code == 0, result.output
+    frames = json.loads(result.stdout)["frames"]
+    assert frames["usable"] == 11 and frames["skip_reasons"] == {"duplicate_stamp": 1}
 
 
 def test_an_image_all_in_the_paints_colour_is_no_stroke() -> None:
@@ -261,6 +260,10 @@ def test_stitch_and_filter_on_a_full_disk_commit_nothing(
         line = one_line_error(run(*args))
         assert "written incompletely (is the disk full?)" in line
         assert not out.exists() or list(out.iterdir()) == []
+    # Python's own writes fail loudly (EFBIG here, ENOSPC on a full disk): named, one line.
+    line = one_line_error(run("fit", rec, "-o", out / "path.json"))
+    assert line.endswith(f"File too large: {out / 'path.json'}"), line
+    assert not out.exists() or list(out.iterdir()) == []
     assert sorted(p.name for p in tmp_path.iterdir() if p.name != "out") == ["scene.mcap"]
 
 
