@@ -15,7 +15,8 @@ worker's address space is capped (``--memory-gb``) and a case that does not fini
 timeout is a hang (the worker is killed and replaced).
 
 Outcomes, counted per base and command:
-  ok           exit 0 (``info`` printed JSON; ``fit`` wrote one complete path file)
+  ok           exit 0 (``info`` printed JSON; ``fit`` wrote one complete path file, and its
+               complete error report when the recording holds a reference)
   error        exit 1 with exactly one ``scrapcut: error:`` line on stderr, nothing written
   traceback    anything else: an uncaught exception, several lines, another exit code
   memory       a MemoryError or OverflowError anywhere, even wrapped in a one-line message
@@ -114,16 +115,22 @@ def _classify(command: str, result: Any, out_dir: str | None) -> tuple[str, str]
 
 
 def _half_written(folder: Path, *, expect_path: bool) -> str:
-    """'' if ``folder`` holds what the outcome promises (one complete path file, or nothing)."""
+    """'' if ``folder`` holds what the outcome promises: nothing after an error; after a fit,
+    one complete path file and, when the recording had a reference, its complete error report
+    (``path.error.json`` and ``.md``)."""
     names = sorted(p.name for p in folder.iterdir())
     if not expect_path:
         return f"left {names}" if names else ""
-    if names != ["path.json"]:
+    if names not in (["path.json"], ["path.error.json", "path.error.md", "path.json"]):
         return f"left {names}"
     try:
         data = json.loads((folder / "path.json").read_text())
+        if "path.error.json" in names:
+            json.loads((folder / "path.error.json").read_text())
+            if not (folder / "path.error.md").read_text().strip():
+                return "path.error.md is empty"
     except ValueError as exc:
-        return f"path.json unreadable: {exc}"
+        return f"an output is unreadable: {exc}"
     return "" if data.get("schema") == "scrapcut.path/v1" else "path.json without its schema"
 
 
@@ -183,7 +190,7 @@ def main() -> None:
         for k in range(args.cases):
             name = names[k % len(names)]
             tasks.append((k, name, "info"))
-            if args.fit_every and k % args.fit_every == 0:
+            if args.fit_every and (k // len(names)) % args.fit_every == 0:  # every base
                 tasks.append((k, name, "fit"))
         pending = list(tasks)
         # Round-robin over workers, one task each at a time (commands are CPU-bound).
