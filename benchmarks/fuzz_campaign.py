@@ -33,7 +33,6 @@ import collections
 import json
 import multiprocessing as mp
 import os
-import platform
 import shutil
 import signal
 import sys
@@ -242,11 +241,10 @@ def main() -> None:
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
+    from scrapcut_cli.pipeline.reproduce import machine_description
+
     print(f"fuzz campaign: {args.cases} mutated recordings ({len(tasks)} runs), seed {args.seed}")
-    print(
-        f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-        f"Python {platform.python_version()}; {args.jobs} worker(s), {wall / 60:.1f} min"
-    )
+    print(f"machine: {machine_description()}; {args.jobs} worker(s), {wall / 60:.1f} min")
     header = f"{'base':<11} {'command':<8}" + "".join(f"{o:>13}" for o in OUTCOMES)
     print(header)
     totals: collections.Counter[str] = collections.Counter()
