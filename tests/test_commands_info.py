@@ -85,13 +85,19 @@ def test_json_has_the_fixed_keys(recording: Path, scan: SyntheticScan) -> None:
 
 def test_options_reach_the_reader(recording: Path) -> None:
     result = _run(
-        str(recording), "--json", "--sync-tolerance-ms", "1", "--base-frame", "panda_hand"
+        str(recording), "--json", "--sync-tolerance-ms", "1", "--base-frame", "/panda_link0"
     )
     assert result.exit_code == 0, result.output
     data = json.loads(result.stdout)
     assert data["frames"]["usable"] == 0
     assert data["frames"]["skip_reasons"] == {"no_depth": 6}
-    assert data["base_frame"] == "panda_hand"
+    assert data["base_frame"] == "panda_link0"
+    # The hand moves during the scan: as a base frame it is refused, naming the fixed one.
+    _assert_one_line_error(
+        _run(str(recording), "--base-frame", "panda_hand"),
+        "--base-frame panda_hand moves during the scan",
+        "(panda_link0)",
+    )
 
 
 def test_tables_name_every_topic_whole(recording: Path) -> None:
