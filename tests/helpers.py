@@ -6,12 +6,17 @@ Units are metres. A "reference" here is the true centre line a fitter should rec
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import os
+import resource
+import signal
+import traceback
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pytest
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
@@ -745,3 +750,40 @@ def one_line_error(result: Any) -> str:
     assert len(lines) == 1 and lines[0].startswith("scrapcut: error: "), result.stderr
     assert "Traceback" not in result.output
     return str(lines[0])
+
+
+def under_file_size_limit(size: int, check: Callable[[], None]) -> None:
+    """Run ``check`` (which asserts) in a forked child whose writes past ``size`` bytes fail
+    with EFBIG, as on a full disk, without root or a small tmpfs.
+
+    The limit (RLIMIT_FSIZE, SIGXFSZ ignored) is a process's: set in the test process it would
+    also cut pytest's own writes to a log file already larger than ``size`` (CI's), so it is
+    only ever set in the child. A failed assertion in the child fails the test with its
+    traceback.
+    """
+    read_end, write_end = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # child: never returns into pytest
+        status = 0
+        try:
+            os.close(read_end)
+            signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+            hard = resource.getrlimit(resource.RLIMIT_FSIZE)[1]
+            resource.setrlimit(resource.RLIMIT_FSIZE, (size, hard))
+            check()
+            message = b""
+        except BaseException:
+            message = traceback.format_exc().encode()
+            status = 1
+        try:
+            os.write(write_end, message)
+        finally:
+            os._exit(status)
+    os.close(write_end)
+    chunks = []
+    while chunk := os.read(read_end, 65536):
+        chunks.append(chunk)
+    os.close(read_end)
+    _, wait_status = os.waitpid(pid, 0)
+    if os.waitstatus_to_exitcode(wait_status) != 0:
+        pytest.fail("in the child with a file size limit:\n" + b"".join(chunks).decode(), False)

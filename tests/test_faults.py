@@ -10,16 +10,13 @@ from __future__ import annotations
 
 import json
 import os
-import resource
-import signal
 import subprocess
 import sys
-from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
-from helpers import one_line_error, synthetic_scan, write_scan
+from helpers import one_line_error, synthetic_scan, under_file_size_limit, write_scan
 from recording_faults import arm_scan
 
 from scrapcut_cli.cli import cli
@@ -202,41 +199,24 @@ def test_convert_refuses_a_name_its_format_cannot_have(tmp_path: Path) -> None:
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.fixture
-def full_disk() -> Iterator[Callable[[int], None]]:
-    """RLIMIT_FSIZE as a full disk for this process (see the module docstring)."""
-    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
-    previous = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-
-    def fill(size: int) -> None:
-        resource.setrlimit(resource.RLIMIT_FSIZE, (size, hard))
-
-    try:
-        yield fill
-    finally:
-        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
-        signal.signal(signal.SIGXFSZ, previous)
-
-
-def test_a_full_disk_is_one_line_and_no_file(
-    tmp_path: Path, full_disk: Callable[[int], None]
-) -> None:
+def test_a_full_disk_is_one_line_and_no_file(tmp_path: Path) -> None:
     rec = arm_scan(tmp_path / "scan.mcap")
     out = tmp_path / "out"
     out.mkdir()
-    full_disk(4096)
-    for args, name in (
-        (["convert", rec, "-o", out / "scan.bag"], "scan.bag"),
-        (["convert", rec, "-o", out / "copy.mcap"], "copy.mcap"),
-    ):
-        line = one_line_error(run(*args))
-        assert line.endswith(f"File too large: {out / name}"), line
+
+    def check() -> None:
+        for args, name in (
+            (["convert", rec, "-o", out / "scan.bag"], "scan.bag"),
+            (["convert", rec, "-o", out / "copy.mcap"], "copy.mcap"),
+        ):
+            line = one_line_error(run(*args))
+            assert line.endswith(f"File too large: {out / name}"), line
+
+    under_file_size_limit(4096, check)
     assert list(out.iterdir()) == []
 
 
-def test_stitch_and_filter_on_a_full_disk_commit_nothing(
-    tmp_path: Path, full_disk: Callable[[int], None]
-) -> None:
+def test_stitch_and_filter_on_a_full_disk_commit_nothing(tmp_path: Path) -> None:
     """open3d's writer reports success on a full disk: the size its header promises is checked
     (the limit holds for the C library's writes too: it is the process's)."""
     from perception_scenes import (
@@ -255,14 +235,17 @@ def test_stitch_and_filter_on_a_full_disk_commit_nothing(
     rec = tmp_path / "scene.mcap"
     write_scene_recording(rec, frames, reference=reference)
     out = tmp_path / "out"
-    full_disk(8000)
-    for args in (["stitch", rec, "-o", out / "cloud.ply"], ["filter", rec, "-o", out]):
-        line = one_line_error(run(*args))
-        assert "written incompletely (is the disk full?)" in line
-        assert not out.exists() or list(out.iterdir()) == []
-    # Python's own writes fail loudly (EFBIG here, ENOSPC on a full disk): named, one line.
-    line = one_line_error(run("fit", rec, "-o", out / "path.json"))
-    assert line.endswith(f"File too large: {out / 'path.json'}"), line
+
+    def check() -> None:
+        for args in (["stitch", rec, "-o", out / "cloud.ply"], ["filter", rec, "-o", out]):
+            line = one_line_error(run(*args))
+            assert "written incompletely (is the disk full?)" in line
+            assert not out.exists() or list(out.iterdir()) == []
+        # Python's own writes fail loudly (EFBIG here, ENOSPC on a full disk): named, one line.
+        line = one_line_error(run("fit", rec, "-o", out / "path.json"))
+        assert line.endswith(f"File too large: {out / 'path.json'}"), line
+
+    under_file_size_limit(8000, check)
     assert not out.exists() or list(out.iterdir()) == []
     assert sorted(p.name for p in tmp_path.iterdir() if p.name != "out") == ["scene.mcap"]
 

@@ -4,16 +4,15 @@ from __future__ import annotations
 
 import errno
 import os
-import resource
 import signal
 import stat
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+from helpers import under_file_size_limit
 
 from scrapcut_cli._io import STALE_AFTER_S, atomic_path, check_input_file, write_text_atomic
 from scrapcut_cli.errors import FileError
@@ -147,42 +146,27 @@ def test_a_disk_error_while_writing_names_the_output(tmp_path: Path) -> None:
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.fixture
-def file_size_limit() -> Iterator[Callable[[int], None]]:
-    """Emulate a full disk without root: RLIMIT_FSIZE with SIGXFSZ ignored makes a write past
-    the limit fail with EFBIG (a C writer that ignores the error leaves a short file)."""
-    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
-    previous = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-
-    def limit(size: int) -> None:
-        resource.setrlimit(resource.RLIMIT_FSIZE, (size, hard))
-
-    try:
-        yield limit
-    finally:
-        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
-        signal.signal(signal.SIGXFSZ, previous)
-
-
-def test_a_file_too_large_for_the_disk_is_one_error_and_no_file(
-    tmp_path: Path, file_size_limit: Callable[[int], None]
-) -> None:
+def test_a_file_too_large_for_the_disk_is_one_error_and_no_file(tmp_path: Path) -> None:
     import numpy as np
 
     from scrapcut_cli.commands.stitch import write_cloud
     from scrapcut_cli.recording.writer import McapWriter
 
     points = np.random.default_rng(0).random((5000, 3))
-    file_size_limit(20_000)
-    with pytest.raises(OSError) as info:
-        write_text_atomic(tmp_path / "path.json", "x" * 50_000)
-    assert info.value.errno == errno.EFBIG and info.value.filename == str(tmp_path / "path.json")
-    for name in ("cloud.ply", "cloud.pcd"):  # open3d reports success on a short file
-        with pytest.raises(FileError, match="written incompletely"):
-            write_cloud(tmp_path / name, points)
-    with pytest.raises(OSError) as info, McapWriter(tmp_path / "x.mcap") as writer:
-        writer.write_pointcloud("/p", 0, "base", points)
-    assert info.value.filename == str(tmp_path / "x.mcap")
+
+    def check() -> None:
+        with pytest.raises(OSError) as info:
+            write_text_atomic(tmp_path / "path.json", "x" * 50_000)
+        assert info.value.errno == errno.EFBIG
+        assert info.value.filename == str(tmp_path / "path.json")
+        for name in ("cloud.ply", "cloud.pcd"):  # open3d reports success on a short file
+            with pytest.raises(FileError, match="written incompletely"):
+                write_cloud(tmp_path / name, points)
+        with pytest.raises(OSError) as info, McapWriter(tmp_path / "x.mcap") as writer:
+            writer.write_pointcloud("/p", 0, "base", points)
+        assert info.value.filename == str(tmp_path / "x.mcap")
+
+    under_file_size_limit(20_000, check)
     assert list(tmp_path.iterdir()) == []
 
 
