@@ -58,6 +58,11 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
         "reproduce",
         "The paper's Table I end to end on the simulator.",
     ),
+    "calibrate": (
+        "scrapcut_cli.commands.calibrate",
+        "calibrate",
+        "Camera mount and clock offset, estimated from the scan.",
+    ),
     "convert": (
         "scrapcut_cli.commands.convert",
         "convert",

@@ -752,6 +752,99 @@ class SimConfig:
     object_yaw_deg: float = rng(0.0, -360.0, 360.0, "deg", "one turn either way")
     # explore start along the line, 0-1; None: the piece's
     start_fraction: float | None = rng(None, 0.0, 1.0, "", "a fraction of the line")
+    # Calibration errors and the camera's clock; None: the noise preset's (yard: 2 mm, 0.3 deg,
+    # 10-20 ms either way, 6 images/s while moving; others: none).
+    hand_eye_error_m: float | None = rng(
+        None, 0.0, 0.05, "m", "a hand-eye error beyond 50 mm is a camera on another mount"
+    )
+    hand_eye_error_deg: float | None = rng(
+        None, 0.0, 10.0, "deg", "a hand-eye error beyond 10 deg is a camera on another mount"
+    )
+    # header stamp minus capture time
+    stamp_offset_s: float | None = rng(
+        None,
+        -0.5,
+        0.5,
+        "s",
+        "camera clocks drift by milliseconds to tens of ms from a robot's; half a second is a "
+        "misconfigured clock, not an offset",
+    )
+    # images per second recorded while moving (0: none)
+    motion_frames_hz: float | None = rng(
+        None, 0.0, 30.0, "Hz", "the D435i streams colour at 6, 15 or 30 Hz at 640 x 480"
+    )
+
+
+@dataclass(frozen=True)
+class CalibrationConfig:
+    """Hand-eye and clock self-calibration from the scan (``scrapcut calibrate``).
+
+    Frames are compared pairwise where they overlap: surface point-to-plane and paint-edge
+    residuals (calibration/solver.py). ``observable_sigma_*`` are the accuracies a direction
+    must be determined to for it to count as observable (an eigen-direction's standard
+    deviation in these units below 1); ``prior_*`` weakly hold every parameter near the
+    published value; a correction within ``consistent_*`` (or 3 sigma) of zero leaves the
+    published calibration as it is.
+    """
+
+    ORDERED: ClassVar[tuple[tuple[str, str], ...]] = (("min_distance_m", "max_distance_m"),)
+
+    # frames compared, chosen for diverse poses and speeds
+    max_frames: int = rng(
+        40, 2, 1000, "", "two frames are the least to compare; 1000 frames take minutes"
+    )
+    # depth samples per frame (a pixel grid)
+    surface_samples: int = rng(
+        1500, 50, 100_000, "", "under 50 samples a frame's surface is unknown; 100,000 is slow"
+    )
+    # paint-edge points thinned to one per cell of this size
+    edge_spacing_m: float = rng(
+        0.002, 2e-4, 0.02, "m", "0.2 mm is below a pixel at the wrist; 20 mm loses the edge"
+    )
+    # overlapping frames each frame is compared with (the most telling)
+    partners: int = rng(6, 1, 100, "", "at least one partner; 100 partners repeat each other")
+    # share of shared 20 mm voxels for two frames to be compared
+    min_overlap: float = rng(0.2, 0.0, 1.0, "", "a share of a frame's surface")
+    max_distance_m: float = rng(
+        0.015,
+        5e-4,
+        0.1,
+        "m",
+        "correspondences beyond 100 mm are different surfaces; the first gate must exceed the "
+        "calibration error",
+    )
+    min_distance_m: float = rng(
+        0.005, 5e-4, 0.1, "m", "the last gate must exceed the depth noise (0.3-1.3 mm)"
+    )
+    # correspondence searches (gates), two Gauss-Newton steps each
+    iterations: int = rng(8, 2, 100, "", "two searches at least; 100 never improve on 10")
+    observable_sigma_m: float = rng(
+        0.0002, 1e-6, 0.01, "m", "the accuracy a mount translation must be determined to"
+    )
+    observable_sigma_deg: float = rng(
+        0.04, 1e-4, 1.0, "deg", "the accuracy a mount rotation must be determined to"
+    )
+    observable_sigma_s: float = rng(
+        0.001, 1e-5, 0.05, "s", "the accuracy the clock offset must be determined to"
+    )
+    prior_translation_m: float = rng(
+        0.01, 1e-4, 0.1, "m", "how far a published hand-eye translation may plausibly be off"
+    )
+    prior_rotation_deg: float = rng(
+        2.0, 0.01, 20.0, "deg", "how far a published hand-eye rotation may plausibly be off"
+    )
+    prior_time_offset_s: float = rng(
+        0.1, 1e-3, 1.0, "s", "how far a camera's stamps may plausibly be off the robot's clock"
+    )
+    consistent_translation_m: float = rng(
+        0.0002, 0.0, 0.01, "m", "smaller mount corrections move a path by less than this"
+    )
+    consistent_rotation_deg: float = rng(
+        0.03, 0.0, 1.0, "deg", "0.03 deg moves a point 0.3 m away by 0.16 mm"
+    )
+    consistent_time_offset_s: float = rng(
+        0.001, 0.0, 0.05, "s", "1 ms at the arm's 0.1-0.3 m/s between views is 0.1-0.3 mm"
+    )
 
 
 @dataclass(frozen=True)
@@ -789,6 +882,7 @@ class ScrapcutConfig:
     exploration: ExplorationConfig = field(default_factory=ExplorationConfig)
     sim: SimConfig = field(default_factory=SimConfig)
     evaluation: EvaluationConfig = field(default_factory=EvaluationConfig)
+    calibration: CalibrationConfig = field(default_factory=CalibrationConfig)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON/TOML-ready dictionary of every parameter."""

@@ -52,3 +52,7 @@ class SimError(ScrapcutError):
 
 class MotionError(ScrapcutError):
     """No joint trajectory: unreadable URDF or tool mount, a path the robot cannot follow."""
+
+
+class CalibrationError(ScrapcutError):
+    """The camera mount and clock offset cannot be estimated (no overlapping views, bad file)."""

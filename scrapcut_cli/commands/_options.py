@@ -471,3 +471,29 @@ def engine_options(f: F) -> F:
         help="Worker processes of the local Dask cluster, one thread each (default: one per core).",
     )(f)
     return f
+
+
+# --------------------------------------------------------------------------- calibration
+
+
+def calibration_option(f: F) -> F:
+    """``--calibration CAL.yaml``: pose frames with a saved camera mount and clock offset."""
+    return click.option(
+        "--calibration",
+        "calibration_path",
+        type=click.Path(dir_okay=False, path_type=Path),
+        default=None,
+        metavar="CAL.yaml",
+        help="Pose frames with the camera mount and clock offset of a calibration "
+        "(scrapcut calibrate -o CAL.yaml) instead of the recording's /tf_static.",
+    )(f)
+
+
+def load_calibration(path: Path | None) -> tuple[Any, dict[str, Any] | None]:
+    """(CameraMount or None, its record for the path file) of ``--calibration``."""
+    if path is None:
+        return None, None
+    from scrapcut_cli.calibration.calfile import mount_record, read_calibration_file
+
+    mount = read_calibration_file(path)
+    return mount, mount_record(mount, origin=str(path))

@@ -15,7 +15,9 @@ from scrapcut_cli._io import real_path
 from scrapcut_cli.commands._options import (
     apply_stage_options,
     build_config,
+    calibration_option,
     config_option,
+    load_calibration,
     paint_options,
     perception_options,
     recording_options,
@@ -147,6 +149,7 @@ def _sink(
     help="Also write each frame's surface band (/scrapcut/surface, or surface_*.ply).",
 )
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+@calibration_option
 @config_option
 @recording_options
 @paint_options
@@ -156,6 +159,7 @@ def filter_cmd(
     output: Path | None,
     with_surface: bool,
     as_json: bool,
+    calibration_path: Path | None,
     config_path: Path | None,
     **options: Any,
 ) -> None:
@@ -174,8 +178,9 @@ def filter_cmd(
         _check_output(output, recording)
     stage, shared = split_stage_options(options)
     config = apply_stage_options(build_config(config_path, **shared), stage)
+    mount, _ = load_calibration(calibration_path)
 
-    with open_recording(recording, config.recording) as rec:
+    with open_recording(recording, config.recording, mount=mount) as rec:
         plan = rec.plan()
         hsv = resolve_recording_paint(config.paint, rec.metadata)
         preset = PAINT_PRESETS.get(hsv.name)
@@ -185,6 +190,8 @@ def filter_cmd(
             "paint": hsv.describe(),
             "params": json.dumps(config.to_dict(), sort_keys=True),
         }
+        if calibration_path is not None:
+            meta["calibration"] = str(calibration_path)
         tally = PerceptionTally(hsv)
         with (
             _sink(

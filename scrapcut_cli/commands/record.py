@@ -96,6 +96,33 @@ METHODS = choice_names(FitMethod)
     default=None,
     help="Depth image encoding: millimetres as realsense-ros, or float metres (default 16UC1).",
 )
+@click.option(
+    "--hand-eye-error-mm",
+    type=config_type("sim.hand_eye_error_m", 1e-3),
+    default=None,
+    help="Hand-eye calibration error: the camera sits this far from where /tf_static says, "
+    "in a random direction [mm] (default: the noise preset's; yard 2).",
+)
+@click.option(
+    "--hand-eye-error-deg",
+    type=config_type("sim.hand_eye_error_deg"),
+    default=None,
+    help="Hand-eye calibration error: rotation about a random axis [deg] (yard 0.3).",
+)
+@click.option(
+    "--stamp-offset-ms",
+    type=config_type("sim.stamp_offset_s", 1e-3),
+    default=None,
+    help="Image header stamps minus capture time on the robot's clock [ms] (default: the "
+    "preset's; yard 10-20 either way, seeded).",
+)
+@click.option(
+    "--motion-frames-hz",
+    type=config_type("sim.motion_frames_hz"),
+    default=None,
+    help="Images per second recorded while the arm moves between views, as a streaming "
+    "camera gives them (default: the preset's; yard 6; 0: only at rest).",
+)
 @config_option
 @click.option(
     "-o",
@@ -120,6 +147,10 @@ def record(
     distance_mm: float | None,
     start_fraction: float | None,
     depth_encoding: str | None,
+    hand_eye_error_mm: float | None,
+    hand_eye_error_deg: float | None,
+    stamp_offset_ms: float | None,
+    motion_frames_hz: float | None,
     config_path: Path | None,
     output: Path | None,
 ) -> None:
@@ -165,6 +196,10 @@ def record(
         view_distance_m=mm_to_m(distance_mm),
         start_fraction=start_fraction,
         depth_encoding=depth_encoding,
+        hand_eye_error_m=mm_to_m(hand_eye_error_mm),
+        hand_eye_error_deg=hand_eye_error_deg,
+        stamp_offset_s=mm_to_m(stamp_offset_ms),
+        motion_frames_hz=motion_frames_hz,
     )
     sim = config.sim
     validate(sim)
@@ -228,7 +263,7 @@ def _print_result(console: Any, result: Any) -> None:
         ("object", result.object),
         ("mode / noise / seed", f"{result.mode} / {result.noise} / {result.seed}"),
         ("views executed", str(result.views)),
-        ("frames", str(result.frames)),
+        ("frames (while moving)", f"{result.frames} ({result.moving_frames})"),
         ("infeasible views (skipped)", str(result.infeasible_views)),
         ("views adjusted (roll / back-off)", str(result.adjusted_views)),
         ("collision checks saw", _PLANNED_WITH.get(result.planned_with, result.planned_with)),

@@ -13,7 +13,9 @@ from scrapcut_cli._io import check_output_path, real_path
 from scrapcut_cli.commands._options import (
     apply_stage_options,
     build_config,
+    calibration_option,
     config_option,
+    load_calibration,
     paint_options,
     perception_options,
     recording_options,
@@ -131,6 +133,7 @@ def binary_cloud_size(path: Path) -> int:
 @click.option(
     "--json", "as_json", is_flag=True, help="Print the summary and per-frame growth as JSON."
 )
+@calibration_option
 @config_option
 @recording_options
 @paint_options
@@ -141,6 +144,7 @@ def stitch(
     output: Path,
     surface_path: Path | None,
     as_json: bool,
+    calibration_path: Path | None,
     config_path: Path | None,
     **options: Any,
 ) -> None:
@@ -166,8 +170,9 @@ def stitch(
             check_output_path(target)
     stage, shared = split_stage_options(options)
     config = apply_stage_options(build_config(config_path, **shared), stage)
+    mount, _ = load_calibration(calibration_path)
 
-    with open_recording(recording, config.recording) as rec:
+    with open_recording(recording, config.recording, mount=mount) as rec:
         plan = rec.plan()
         hsv = resolve_recording_paint(config.paint, rec.metadata)
         with progress("frames") as bar:

@@ -37,6 +37,7 @@ from scrapcut_cli.errors import FileError, RecordingError
 from scrapcut_cli.geometry import transform_points
 from scrapcut_cli.recording import messages as m
 from scrapcut_cli.recording.frame import CameraModel, Frame
+from scrapcut_cli.recording.mount import CameraMount
 from scrapcut_cli.recording.salvage import SalvageReport, salvage_mcap
 from scrapcut_cli.recording.structure import Damaged, check_mcap, check_ros1
 from scrapcut_cli.recording.tf import TfBuffer
@@ -176,26 +177,34 @@ def detect_format(path: Path) -> str:
 
 
 def open_recording(
-    path: str | os.PathLike[str], config: RecordingConfig | None = None
+    path: str | os.PathLike[str],
+    config: RecordingConfig | None = None,
+    *,
+    mount: CameraMount | None = None,
 ) -> Recording:
     """Open a recording for reading (a context manager; close it when done).
 
     Only the index is read here; topics, camera and TF are resolved when first needed, so a
-    recording without camera topics still serves :meth:`Recording.reference`.
+    recording without camera topics still serves :meth:`Recording.reference`. With ``mount``
+    (a calibration) frames are posed with its camera mount and clock offset instead of the
+    recording's /tf_static and header stamps alone.
     """
-    return Recording(Path(path), config or RecordingConfig())
+    return Recording(Path(path), config or RecordingConfig(), mount=mount)
 
 
 class Recording:
     """An open recording. See the module docstring for what each pass reads."""
 
-    def __init__(self, path: Path, config: RecordingConfig) -> None:
+    def __init__(
+        self, path: Path, config: RecordingConfig, *, mount: CameraMount | None = None
+    ) -> None:
         from rosbags.highlevel import AnyReader
 
         if path.name == "metadata.yaml" and path.is_file():
             path = path.parent
         self.path = path
         self.config = config
+        self.mount = mount
         self.format = detect_format(path)
         #: What ``--salvage`` kept of a damaged MCAP (None: the file was read as it is).
         self.salvaged: SalvageReport | None = None
@@ -213,6 +222,7 @@ class Recording:
         self._tf: TfBuffer | None = None
         self._plan: FramePlan | None = None
         self._headers: tuple[_ImageHeaders, _ImageHeaders] | None = None
+        self._published_mount: CameraMount | None = None
 
     def _checked_source(self) -> Path:
         """The file or folder to hand to rosbags, after the structure checks (a salvaged copy
@@ -763,12 +773,61 @@ class Recording:
     def _poses(
         self, base: str, camera_frame: str, stamps: NDArray[np.int64]
     ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        if self.mount is not None:
+            mount = self._checked_mount(self.mount)
+            T, valid = self.moving_poses(stamps + mount.time_offset_ns)
+            return T @ mount.T_moving_camera, valid
         try:
             return self.tf.lookup(base, camera_frame, stamps)
         except RecordingError as exc:
             raise RecordingError(
                 f"no TF path from image frame {camera_frame!r} to base frame {base!r}: {exc}"
             ) from None
+
+    # ------------------------------------------------------------------ camera mount
+
+    def published_mount(self) -> CameraMount:
+        """The camera mount as the recording publishes it (time offset 0).
+
+        The moving frame is the child of the last /tf transform between the base frame and
+        the image's frame; the mount composes the /tf_static links below it.
+        """
+        if self._published_mount is None:
+            base, camera = self.base_frame, self.camera_frame
+            try:
+                moving = self.tf.moving_frame(base, camera)
+                T = self.tf.lookup_one(moving, camera, 0)  # static links only: any stamp
+            except RecordingError as exc:
+                raise RecordingError(
+                    f"no TF path from image frame {camera!r} to base frame {base!r}: {exc}"
+                ) from None
+            self._published_mount = CameraMount(moving, camera, T, 0.0)
+        return self._published_mount
+
+    def moving_poses(
+        self, stamps_ns: NDArray[np.int64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """T_base_moving (N, 4, 4) of the mount's moving frame at TF-clock stamps (N,) int64 ns,
+        and whether each is inside the /tf time range (poses interpolated, never extrapolated)."""
+        moving = self.published_mount().moving_frame
+        return self.tf.lookup(self.base_frame, moving, np.asarray(stamps_ns, dtype=np.int64))
+
+    def _checked_mount(self, mount: CameraMount) -> CameraMount:
+        """``mount`` if it fits this recording's TF chain; RecordingError naming the mismatch."""
+        camera, base = self.camera_frame, self.base_frame
+        if mount.camera_frame != camera:
+            raise RecordingError(
+                f"the calibration is for camera frame {mount.camera_frame!r} but the images of "
+                f"{self.path.name} are in {camera!r}"
+            )
+        published = self.published_mount()
+        if mount.moving_frame != published.moving_frame:
+            raise RecordingError(
+                f"the calibration mounts the camera on {mount.moving_frame!r} but in "
+                f"{self.path.name} the last frame /tf moves above {camera!r} is "
+                f"{published.moving_frame!r} (base {base!r})"
+            )
+        return mount
 
     def frames(self) -> Iterator[Frame]:
         """Stream exactly the planned frames, index 0 .. usable-1, in recording order.

@@ -149,6 +149,33 @@ class TfBuffer:
         chain = self._chain(target_frame, source_frame)
         return all(self._edges[c].static for c in chain[0] + chain[1])
 
+    def moving_frame(self, target_frame: str, source_frame: str) -> str:
+        """The last frame /tf moves on the way from ``target_frame`` down to ``source_frame``.
+
+        The child of the last dynamic transform of the chain; below it only /tf_static links
+        lead to ``source_frame`` (a camera on a robot's flange: the flange). ``target_frame``
+        itself when every link is static, ``source_frame`` when its own link is dynamic.
+        """
+        up, down = self._chain(target_frame, source_frame)
+        moving = target_frame
+        for child in down:
+            if not self._edges[child].static:
+                moving = child
+        if moving == target_frame and any(not self._edges[c].static for c in up):
+            # The chain moves only above the common ancestor: the ancestor carries the camera.
+            moving = self._edges[up[-1]].parent
+        return moving
+
+    def path_down(self, ancestor: str, frame: str) -> list[str]:
+        """Frames from ``ancestor`` down to ``frame``, both included (a chain of links).
+
+        Raises RecordingError if ``ancestor`` is not ``frame`` or one of its ancestors.
+        """
+        path = self._path_to_root(frame)
+        if ancestor not in path:
+            raise RecordingError(f"TF frame {ancestor!r} is not above {frame!r}")
+        return path[: path.index(ancestor) + 1][::-1]
+
     def time_range(self, target_frame: str, source_frame: str) -> tuple[int, int] | None:
         """(first, last) stamp at which the transform is known; None if it is timeless."""
         up, down = self._chain(target_frame, source_frame)

@@ -33,6 +33,12 @@ Hand-eye error (``yard``)
     2 mm and 0.3°, random directions (issue 3; a typical residual of a hand-eye calibration).
     /tf_static publishes the nominal transform while the image is rendered from the perturbed
     one, as on a real robot with an imperfect calibration.
+Clock offset and frames while moving (``yard``)
+    A D435i streams all the time; a recording holds the frames taken while the arm moves
+    between views too (``motion_frames_hz``; ``yard`` 6 Hz, the D435i's slowest colour rate,
+    to keep recordings small). Its header stamps come from the camera's clock, not the robot's:
+    ``yard`` stamps images 10–20 ms off the capture time (issue 13: 5–30 ms on real cells),
+    early or late at random. That only matters while the arm moves.
 Lighting variation (``yard``)
     Per view: gain 0.75–1.15, a warm/cool tint of ±4 % on red and blue, and a linear brightness
     ramp of ±15 % across the image (sun, clouds and shadows of an outdoor yard; assumed).
@@ -114,6 +120,8 @@ class NoisePreset:
     color_sigma_dn: float = 2.0
     hand_eye_translation_m: float = 0.0
     hand_eye_rotation_deg: float = 0.0
+    stamp_offset_ms: tuple[float, float] = (0.0, 0.0)  # |offset| drawn in this range, either sign
+    motion_frames_hz: float = 0.0  # images per second recorded while the arm moves
     lighting_variation: bool = False
     overspray: str = "light"
 
@@ -142,6 +150,8 @@ NOISE_PRESETS: dict[str, NoisePreset] = {
         color_sigma_dn=3.0,
         hand_eye_translation_m=0.002,
         hand_eye_rotation_deg=0.3,
+        stamp_offset_ms=(10.0, 20.0),
+        motion_frames_hz=6.0,
         lighting_variation=True,
         overspray="heavy",
     ),
@@ -157,23 +167,42 @@ def noise_preset(name: str) -> NoisePreset:
 
 
 def perturb_hand_eye(
-    T_hand_camlink: ArrayLike, preset: NoisePreset, rng: np.random.Generator
+    T_hand_camlink: ArrayLike,
+    preset: NoisePreset,
+    rng: np.random.Generator,
+    *,
+    translation_m: float | None = None,
+    rotation_deg: float | None = None,
 ) -> FloatArray:
-    """The true hand-eye transform: the nominal one moved by the preset's calibration error.
+    """The true hand-eye transform: the nominal one moved by a calibration error.
 
-    A translation of exactly ``hand_eye_translation_m`` and a rotation of exactly
-    ``hand_eye_rotation_deg``, each about a random direction, applied in the camera_link frame.
+    A translation of exactly ``translation_m`` and a rotation of exactly ``rotation_deg``
+    (default: the preset's ``hand_eye_translation_m`` / ``hand_eye_rotation_deg``), each about
+    a random direction, applied in the camera_link frame.
     """
     T = np.asarray(T_hand_camlink, dtype=np.float64)
+    if translation_m is None:
+        translation_m = preset.hand_eye_translation_m
+    if rotation_deg is None:
+        rotation_deg = preset.hand_eye_rotation_deg
     direction = rng.normal(size=3)
     direction /= np.linalg.norm(direction)
     axis = rng.normal(size=3)
     axis /= np.linalg.norm(axis)
     delta = make_transform(
-        Rotation.from_rotvec(np.radians(preset.hand_eye_rotation_deg) * axis).as_matrix(),
-        preset.hand_eye_translation_m * direction,
+        Rotation.from_rotvec(np.radians(rotation_deg) * axis).as_matrix(),
+        translation_m * direction,
     )
     return np.asarray(T @ delta)
+
+
+def draw_stamp_offset(preset: NoisePreset, rng: np.random.Generator) -> float:
+    """Seconds the camera's header stamps lie after the capture time (negative: before)."""
+    low, high = preset.stamp_offset_ms
+    if high <= 0.0:
+        return 0.0
+    magnitude = rng.uniform(low, high) / 1000.0
+    return float(magnitude if rng.random() < 0.5 else -magnitude)
 
 
 # --------------------------------------------------------------------------- depth

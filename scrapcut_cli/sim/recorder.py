@@ -7,6 +7,7 @@ One loop serves every mode (the planner contract of :mod:`scrapcut_cli.cell`)::
         execute decision.T_base_cam (IK, free DOFs, collisions at the view and on the way:
             the straight joint-space move, or a detour through the ready pose)  -> or skip it
         move there (minimum-jerk motion; /tf and /joint_states at tf_rate_hz)
+            (and images at motion_frames_hz on the way, the camera streaming)
         rest, capture frames_per_view images, write them
         decision = planner.observe(frame)   # the view's last image, exactly as a reader reads it
 
@@ -35,7 +36,10 @@ What is written (DESIGN.md, realsense-ros 4.x names)
 * MCAP metadata ``scrapcut`` (object, mode, noise, paint, stroke_width_m, seed, tool_version,
   params = JSON of everything used) and ``scrapcut_result`` (counts of this run).
 
-Header stamps are the truth. Log times trail them like a real bag's receive times: images by
+Image header stamps are the capture time plus the camera's clock offset (``yard``: 10–20 ms
+either way; 0 otherwise; ``SimConfig.stamp_offset_s``), /tf stamps the robot's time; the
+metadata ``params`` keep the true mount and offset under ``truth`` for tests (the pipeline never
+reads them). Log times trail header stamps like a real bag's receive times: images by
 20–40 ms, /tf and /joint_states by 0.3–2 ms (seeded), and messages are written in log-time
 order, so a reader that sorts by log time instead of header stamp gets wrong poses.
 The simulated clock starts at :data:`START_NS`; nothing depends on the wall clock, so the same
@@ -84,6 +88,7 @@ from scrapcut_cli.sim.camera import (
     d435i_color_camera,
     depth_to_millimetres,
     draw_lighting,
+    draw_stamp_offset,
     noise_preset,
     perturb_hand_eye,
     simulate_color,
@@ -132,6 +137,7 @@ MIN_JERK_PEAK = 1.875
 # Independent random streams: numpy Generators seeded by (seed, stream, index...).
 _STREAM_HAND_EYE, _STREAM_LATENCY, _STREAM_LIGHT, _STREAM_SENSOR, _STREAM_STAMP = range(5)
 _STREAM_START = 5
+_STREAM_CLOCK, _STREAM_MOVING = 6, 7
 
 
 @dataclass(frozen=True)
@@ -147,7 +153,8 @@ class RecordResult:
     closest the robot and camera came to the true piece (at most 0.1 m; negative: into it),
     ``planned_with`` what collision checks saw (``truth``: the piece's mesh, the oracle modes;
     ``observed``: the camera's voxels, explore), ``camera_travel_m`` length of the camera's
-    path, ``duration_s`` simulated time, ``wall_time_s`` real time.
+    path, ``duration_s`` simulated time, ``wall_time_s`` real time, ``moving_frames`` the
+    frames taken while the arm moved.
     """
 
     path: Path
@@ -168,6 +175,7 @@ class RecordResult:
     wall_time_s: float
     stop_reason: str
     view_log: tuple[dict[str, Any], ...] = ()
+    moving_frames: int = 0  # of ``frames``, taken while the arm moved
 
 
 def validate(config: SimConfig) -> None:
@@ -281,10 +289,30 @@ def record(
     preset = noise_preset(config.noise)
     camera = d435i_color_camera(config.width, config.height)
     T_hand_camlink_true = T_HAND_CAMLINK
-    if preset.hand_eye_translation_m > 0 or preset.hand_eye_rotation_deg > 0:
+    error_m = (
+        preset.hand_eye_translation_m
+        if config.hand_eye_error_m is None
+        else config.hand_eye_error_m
+    )
+    error_deg = (
+        preset.hand_eye_rotation_deg
+        if config.hand_eye_error_deg is None
+        else config.hand_eye_error_deg
+    )
+    if error_m > 0 or error_deg > 0:
         T_hand_camlink_true = perturb_hand_eye(
-            T_HAND_CAMLINK, preset, _rng(config.seed, _STREAM_HAND_EYE)
+            T_HAND_CAMLINK,
+            preset,
+            _rng(config.seed, _STREAM_HAND_EYE),
+            translation_m=error_m,
+            rotation_deg=error_deg,
         )
+    stamp_offset_s = config.stamp_offset_s
+    if stamp_offset_s is None:
+        stamp_offset_s = draw_stamp_offset(preset, _rng(config.seed, _STREAM_CLOCK))
+    motion_hz = (
+        preset.motion_frames_hz if config.motion_frames_hz is None else config.motion_frames_hz
+    )
     overspray = OVERSPRAY_PRESETS[preset.overspray]
     stroke = PaintStroke(
         obj.reference,
@@ -306,8 +334,19 @@ def record(
         ) as robot,
         McapWriter(out_path) as writer,
     ):
-        session = _Session(writer, robot, renderer, camera, preset, config, observed=observed)
+        session = _Session(
+            writer,
+            robot,
+            renderer,
+            camera,
+            preset,
+            config,
+            observed=observed,
+            stamp_offset_ns=round(stamp_offset_s * 1e9),
+            motion_frames_hz=motion_hz,
+        )
         params = _params(config, preset, camera, T_hand_camlink_true, limits, stroke)
+        params["truth"] = _truth(robot, stamp_offset_s, motion_hz)
         active: ViewPlanner
         if planner is not None:
             active = planner
@@ -355,6 +394,7 @@ def record(
             wall_time_s=0.0,
             stop_reason=stop_reason,
             view_log=tuple(session.log),
+            moving_frames=session.moving_frames,
         )
         writer.add_metadata("scrapcut_result", _result_metadata(result))
     return dataclasses.replace(result, wall_time_s=time.perf_counter() - wall_start)
@@ -399,6 +439,8 @@ class _Session:
         config: SimConfig,
         *,
         observed: ObservedScene | None = None,
+        stamp_offset_ns: int = 0,
+        motion_frames_hz: float = 0.0,
     ) -> None:
         self.writer = writer
         self.robot = robot
@@ -421,6 +463,10 @@ class _Session:
         self.travel_m = 0.0
         self.log: list[dict[str, Any]] = []
         self._names = list(joint_names())
+        self.stamp_offset_ns = int(stamp_offset_ns)
+        self.motion_frames_hz = float(motion_frames_hz)
+        self.moving_frames = 0
+        self._moves = 0
 
     # ------------------------------------------------------------------ message queue
 
@@ -530,6 +576,8 @@ class _Session:
         tau = (stamps - start).astype(np.float64) / (end - start)
         qs = q0 + _min_jerk(tau)[:, None] * delta
         self._publish_states(stamps, qs)
+        if self.motion_frames_hz > 0:
+            self._capture_moving(start, end, q0, delta)
         fine = q0 + _min_jerk(np.linspace(0.0, 1.0, 101))[:, None] * delta
         positions = self.robot.camera_poses(fine)[:, :3, 3]
         self.travel_m += float(np.linalg.norm(np.diff(positions, axis=0), axis=1).sum())
@@ -639,7 +687,7 @@ class _Session:
         rest = SETTLE_S + jitter + cfg.frames_per_view * FRAME_PERIOD_S + POST_CAPTURE_S
         frame: Frame | None = None
         for k in range(cfg.frames_per_view):
-            stamp = first + round(k * FRAME_PERIOD_S * 1e9)
+            stamp = first + round(k * FRAME_PERIOD_S * 1e9) + self.stamp_offset_ns
             rng = _rng(cfg.seed, _STREAM_SENSOR, view, k)
             depth_m = simulate_depth(rendered.depth, rendered.cos_incidence, self.preset, rng)
             color = simulate_color(rendered.color, self.preset, rng)
@@ -659,6 +707,37 @@ class _Session:
         self._rest(rest)
         assert frame is not None
         return frame
+
+    def _capture_moving(
+        self, start_ns: int, end_ns: int, q0: FloatArray, delta: FloatArray
+    ) -> None:
+        """Images while the arm moves from ``q0`` by ``delta`` (minimum jerk, start to end).
+
+        On the camera's own clock: one every 1 / motion_frames_hz seconds from a seeded phase,
+        each rendered at the arm's true pose at its capture time and stamped with the clock
+        offset (motion blur is not modelled). The planner does not see them.
+        """
+        cfg = self.config
+        move = self._moves
+        self._moves += 1
+        period_ns = round(1e9 / self.motion_frames_hz)
+        phase = _rng(cfg.seed, _STREAM_MOVING, move).uniform(0.0, 1.0)
+        first = start_ns + round(phase * period_ns)
+        captures = np.arange(first, end_ns, period_ns, dtype=np.int64)
+        if captures.size == 0:
+            return
+        lighting = draw_lighting(self.preset, _rng(cfg.seed, _STREAM_LIGHT, 100_000 + move))
+        tau = (captures - start_ns).astype(np.float64) / (end_ns - start_ns)
+        poses = self.robot.camera_poses(q0 + _min_jerk(tau)[:, None] * delta, true=True)
+        for k, (capture, T_true) in enumerate(zip(captures.tolist(), poses, strict=True)):
+            rendered = self.renderer.render(T_true, self.camera, lighting=lighting)
+            rng = _rng(cfg.seed, _STREAM_SENSOR, 100_000 + move, k)
+            depth_m = simulate_depth(rendered.depth, rendered.cos_incidence, self.preset, rng)
+            color = simulate_color(rendered.color, self.preset, rng)
+            depth_msg, _ = _encode_depth(depth_m, cfg.depth_encoding)
+            self._write_images(capture + self.stamp_offset_ns, color, depth_msg)
+            self.frames += 1
+            self.moving_frames += 1
 
     def _write_images(self, stamp: int, color: NDArray[np.uint8], depth: NDArray[Any]) -> None:
         w = self.writer
@@ -800,6 +879,19 @@ def _params(
             "min_move": MIN_MOVE_S,
         },
         "start_ns": START_NS,
+    }
+
+
+def _truth(robot: PandaSim, stamp_offset_s: float, motion_frames_hz: float) -> dict[str, Any]:
+    """What a calibration should find, in ``scrapcut calibrate``'s terms (tests only)."""
+    T = robot.kin.T_link8_hand @ robot.T_hand_camlink_true @ T_CAMLINK_OPTICAL
+    return {
+        "moving_frame": FLANGE_FRAME,
+        "camera_frame": OPTICAL_FRAME,
+        "T_moving_camera": np.asarray(T).tolist(),
+        "time_offset_s": -stamp_offset_s,
+        "stamp_offset_s": stamp_offset_s,
+        "motion_frames_hz": motion_frames_hz,
     }
 
 

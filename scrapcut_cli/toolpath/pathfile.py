@@ -48,12 +48,15 @@ def path_to_dict(
     config: Mapping[str, Any],
     frame_id: str,
     created: str | None = None,
+    calibration: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The path file as a JSON-ready dictionary.
 
     ``source``: path, sha256_first_mib, frames_used, frames_skipped of the recording.
     ``config``: every parameter used (``ScrapcutConfig.to_dict()``). ``created``: ISO-8601
     time stamp; default now (UTC) — pass a fixed one for byte-identical files.
+    ``calibration``: the camera mount and clock offset the frames were posed with, when not
+    the recording's own (``--calibration`` / ``--self-calibrate``); stored as ``calibration``.
     """
     if created is None:
         created = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
@@ -92,6 +95,7 @@ def path_to_dict(
             "summary": _jsonable(dict(path.info)),
         },
         "config": _jsonable(dict(config)),
+        **({} if calibration is None else {"calibration": _jsonable(dict(calibration))}),
     }
 
 
