@@ -139,6 +139,8 @@ def test_every_numeric_option_is_bounded_and_agrees_with_its_parameter() -> None
                 assert (unit, kind.scale) == ("s", 1e-3), where
             elif flag.endswith("-deg"):
                 assert (unit, kind.scale) == ("deg", 1.0), where
+            elif flag.endswith("-hz"):
+                assert (unit, kind.scale) == ("Hz", 1.0), where
             else:
                 assert kind.scale == 1.0 and unit in ("", "px"), where
         for bad in ("inf", "-inf", "nan"):
