@@ -99,7 +99,7 @@ class CalibrationScan:
 
     def __post_init__(self) -> None:
         self.camera = replace(small_camera(self.width, self.height), frame_id=CAMERA_FRAME)
-        self.reference = _top_line(600, length_m=0.34)
+        self.reference = _top_line(120, length_m=0.34)
         M_inv = invert_transform(PUBLISHED_MOUNT)
         # The robot goes where the published mount says the views are.
         self.flanges = [look_down(**v) @ M_inv for v in self.views]

@@ -757,6 +757,7 @@ class _Context:
     rotation_axis_cam: FloatArray | None  # (3,) when all rotations share one axis
     max_speed_m_s: float  # fastest moving-frame motion at a capture time
     flat: bool  # all surface normals within 10 degrees of one direction
+    travel_line_cam: FloatArray | None  # (3,) when the camera only slid along one line
 
     @staticmethod
     def of(frames: _Frames) -> _Context:
@@ -779,7 +780,13 @@ class _Context:
         mean = normals.mean(axis=0)
         mean /= max(float(np.linalg.norm(mean)), 1e-12)
         flat = bool(np.quantile(normals @ mean, 0.05) > math.cos(math.radians(10.0)))
-        return _Context(max_angle, axis, float(speeds.max()), flat)
+        line = None
+        if max_angle < 2.0 and len(R) >= 2:
+            shifts = (frames.T[:, :3, 3] - frames.T[0, :3, 3]) @ R[0]  # camera 0's axes
+            _, s, vt = np.linalg.svd(shifts, full_matrices=False)
+            if s[0] > 1e-3 and (len(s) < 2 or s[1] < 0.1 * s[0]):
+                line = vt[0]
+        return _Context(max_angle, axis, float(speeds.max()), flat, line)
 
 
 _AXES = ("x (across the image)", "y (down the image)", "z (the optical axis)")
@@ -802,8 +809,7 @@ def _describe(vector: FloatArray, sigma: object, context: _Context) -> Direction
             )
     else:
         g = groups[main] / math.sqrt(weight[main])
-        axis = int(np.argmax(np.abs(g)))
-        along = f"camera {_AXES[axis]}" if abs(g[axis]) > 0.9 else _vector_text(g)
+        along = _axis_text(g)
         what = f"{main} {'along' if main == 'translation' else 'about'} {along}"
         if main == "translation" and context.max_angle_deg < 2.0:
             why = (
@@ -816,6 +822,15 @@ def _describe(vector: FloatArray, sigma: object, context: _Context) -> Direction
                 f"({_vector_text(context.rotation_axis_cam)} in the camera frame): translation "
                 "along it is not observable"
             )
+        elif (
+            main == "rotation"
+            and context.travel_line_cam is not None
+            and abs(float(g @ context.travel_line_cam)) > 0.9
+        ):
+            why = (
+                f"the camera only moved along one line ({_axis_text(context.travel_line_cam)}) "
+                "without turning: rotation about that line is not observable"
+            )
         elif context.flat:
             why = "the surface seen is flat and the paint's edges do not constrain this direction"
         else:
@@ -826,6 +841,12 @@ def _describe(vector: FloatArray, sigma: object, context: _Context) -> Direction
         what=what,
         why=why,
     )
+
+
+def _axis_text(v: FloatArray) -> str:
+    """``camera y (down the image)`` when ``v`` is close to an axis, else its components."""
+    axis = int(np.argmax(np.abs(v)))
+    return f"camera {_AXES[axis]}" if abs(v[axis]) > 0.9 else _vector_text(v)
 
 
 def _vector_text(v: FloatArray) -> str:
