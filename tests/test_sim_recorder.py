@@ -29,6 +29,7 @@ from scrapcut_cli.geometry import (
 )
 from scrapcut_cli.perception.paint import PAINT_PRESETS, paint_mask
 from scrapcut_cli.recording.frame import Frame
+from scrapcut_cli.recording.mount import CameraMount
 from scrapcut_cli.recording.reader import open_recording
 from scrapcut_cli.sim import list_objects, record
 from scrapcut_cli.sim.camera import T_CAMLINK_OPTICAL, T_HAND_CAMLINK
@@ -192,9 +193,12 @@ def test_reader_returns_exactly_what_the_planner_saw(
     assert np.allclose(reference, place_object(SimConfig()).reference, atol=1e-12)
 
 
-def paint_distances(path: Path) -> tuple[np.ndarray, float]:
-    """Distances (m) of back-projected orange pixels to the reference; the stroke's max half."""
-    with open_recording(path) as rec:
+def paint_distances(path: Path, mount: CameraMount | None = None) -> tuple[np.ndarray, float]:
+    """Distances (m) of back-projected orange pixels to the reference; the stroke's max half.
+
+    ``mount``: pose the frames with this camera mount and clock offset (default: as recorded).
+    """
+    with open_recording(path, mount=mount) as rec:
         reference = rec.reference()
         assert reference is not None
         params = json.loads(rec.metadata["scrapcut"]["params"])
@@ -242,6 +246,50 @@ def test_yard_records_the_nominal_hand_eye_but_renders_the_true_one(tmp_path: Pa
         assert np.degrees(rotation_angle(true[:3, :3], recorded[:3, :3])) == pytest.approx(0.3)
         offset = np.linalg.norm(true[:3, 3] - recorded[:3, 3])
         assert offset == pytest.approx(0.002, abs=0.015 * np.radians(0.3) + 1e-9)
+
+
+def test_frames_while_moving_are_rendered_at_the_capture_time_the_truth_names(
+    tmp_path: Path,
+) -> None:
+    """Explicit hand-eye error and clock offset, images streamed while the arm moves.
+
+    Exact images (ideal, float depth): posed with the true mount and clock offset kept in the
+    metadata, every paint pixel of every frame, moving or not, lies on the stroke (as the ideal
+    test above: half width + 0.6 mm); posed as the recording publishes them it does not.
+    """
+    path = tmp_path / "moving.mcap"
+    config = SimConfig(
+        width=80,
+        height=60,
+        views=2,
+        noise="ideal",
+        depth_encoding="32FC1",
+        seed=4,
+        hand_eye_error_m=0.001,
+        hand_eye_error_deg=0.2,
+        stamp_offset_s=0.012,
+        motion_frames_hz=10.0,
+    )
+    result = record(config, path)
+    assert result.moving_frames >= 5 and result.frames == result.views + result.moving_frames
+    with open_recording(path) as rec:
+        truth = json.loads(rec.metadata["scrapcut"]["params"])["truth"]
+        published = rec.published_mount()
+        stamps = rec.plan().stamps_ns
+    assert truth["time_offset_s"] == -0.012 and truth["moving_frame"] == "panda_link8"
+    # On the camera's clock: 100 ms apart while moving (the rest frames interleave).
+    assert np.count_nonzero(np.diff(stamps) == 100_000_000) >= result.moving_frames - 3
+    true_mount = CameraMount(
+        published.moving_frame,
+        published.camera_frame,
+        np.array(truth["T_moving_camera"]),
+        truth["time_offset_s"],
+    )
+    d_true, half = paint_distances(path, true_mount)
+    assert len(d_true) > 300
+    assert d_true.max() <= half + 0.0006
+    d_published, _ = paint_distances(path)
+    assert d_published.max() > half + 0.001
 
 
 def test_same_seed_same_bytes(tmp_path: Path) -> None:
