@@ -60,9 +60,7 @@ def test_round_trip_gives_the_corrected_mount_and_offset(tmp_path: Path) -> None
     path = tmp_path / "cal.yaml"
     write_calibration_file(path, calibration)
     mount = read_calibration_file(path)
-    np.testing.assert_allclose(
-        mount.T_moving_camera, calibration.mount.T_moving_camera, atol=1e-12
-    )
+    np.testing.assert_allclose(mount.T_moving_camera, calibration.mount.T_moving_camera, atol=1e-12)
     assert mount.time_offset_s == pytest.approx(-0.014, abs=1e-12)
     assert (mount.moving_frame, mount.camera_frame) == ("panda_link8", "camera_color_optical_frame")
     data = YAML(typ="safe", pure=True).load(path.read_text())
@@ -135,9 +133,7 @@ def test_a_consistent_calibration_keeps_the_published_mount(tmp_path: Path) -> N
         ),
     ],
 )
-def test_bad_calibration_files_are_one_clear_error(
-    tmp_path: Path, text: str, message: str
-) -> None:
+def test_bad_calibration_files_are_one_clear_error(tmp_path: Path, text: str, message: str) -> None:
     path = tmp_path / "cal.yaml"
     path.write_text(text)
     with pytest.raises(CalibrationError, match=message) as info:

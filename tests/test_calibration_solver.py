@@ -170,9 +170,10 @@ def test_observations_lie_on_the_surface_and_on_the_paint_edge() -> None:
         if normals is not None:
             n = normals @ T[:3, :3].T
             pipe = np.abs(radial - CYLINDER_RADIUS_M) < 1e-4
-            true_n = np.column_stack(
-                [np.zeros(pipe.sum()), (P[pipe, 1] - y0), (P[pipe, 2] - z0)]
-            ) / CYLINDER_RADIUS_M
+            true_n = (
+                np.column_stack([np.zeros(pipe.sum()), (P[pipe, 1] - y0), (P[pipe, 2] - z0)])
+                / CYLINDER_RADIUS_M
+            )
             cos = np.einsum("ij,ij->i", n[pipe], true_n)
             assert np.median(cos) > np.cos(np.radians(3.0))
     # Edge points sit half a stroke from the painted centre line, within a pixel (1.8 mm).
