@@ -817,7 +817,7 @@ class CalibrationConfig:
         0.005, 5e-4, 0.1, "m", "the last gate must exceed the depth noise (0.3-1.3 mm)"
     )
     # correspondence searches (gates), two Gauss-Newton steps each
-    iterations: int = rng(8, 2, 100, "", "two searches at least; 100 never improve on 10")
+    iterations: int = rng(6, 2, 100, "", "two searches at least; 100 never improve on 10")
     observable_sigma_m: float = rng(
         0.0002, 1e-6, 0.01, "m", "the accuracy a mount translation must be determined to"
     )
