@@ -785,9 +785,15 @@ class CalibrationConfig:
     deviation in these units below 1); ``prior_*`` weakly hold every parameter near the
     published value; a correction within ``consistent_*`` (or 3 sigma) of zero leaves the
     published calibration as it is.
+
+    ``file`` (a CAL.yaml of ``scrapcut calibrate -o``) or ``self_calibrate`` (estimate it from
+    the recording first) make every stitch pose the frames with that mount and clock offset.
     """
 
     ORDERED: ClassVar[tuple[tuple[str, str], ...]] = (("min_distance_m", "max_distance_m"),)
+
+    file: str | None = None  # CAL.yaml to pose frames with (--calibration)
+    self_calibrate: bool = False  # estimate the calibration from the recording (--self-calibrate)
 
     # frames compared, chosen for diverse poses and speeds
     max_frames: int = rng(

@@ -186,3 +186,29 @@ def test_output_writes_the_path_file_of_the_observed_frames(
     assert ours.coverage >= 0.95 and theirs.coverage >= 0.95
     assert abs(ours.mean_m - theirs.mean_m) < 0.001
     assert abs(len(cutting) - len(fit_cutting)) <= 3
+
+
+def test_a_replay_with_a_calibration_fits_its_frames_posed_with_it(
+    explored: tuple[Path, LoopResult], tmp_path: Path
+) -> None:
+    """The decisions are checked with the poses the planner had; the global fit poses the same
+    frames with the calibration: here 3 mm further along the optical axis, which looks down."""
+    path, _ = explored
+    cal = tmp_path / "cal.yaml"
+    cal.write_text(
+        "schema: scrapcut.calibration/v1\nmoving_frame: camera_link\n"
+        "camera_frame: camera_optical\n"
+        "T_moving_camera: {translation_m: [0, 0, 0.003], rotation_xyzw: [0, 0, 0, 1]}\n"
+        "time_offset_s: 0.0\n"
+    )
+    plain, moved = tmp_path / "plain.json", tmp_path / "moved.json"
+    assert _run("explore", path, "-o", plain).exit_code == 0
+    result = _run("explore", path, "-o", moved, "--calibration", cal)
+    assert result.exit_code == 0, result.output
+    assert "matches the log" in result.stdout
+    a = json.loads(plain.read_text())
+    b = json.loads(moved.read_text())
+    assert "calibration" not in a and b["calibration"]["origin"] == str(cal)
+    za = np.array(a["curve"]["points"])[:, 2]
+    zb = np.array(b["curve"]["points"])[:, 2]
+    assert np.median(zb) - np.median(za) == pytest.approx(-0.003, abs=0.0005)

@@ -15,7 +15,7 @@ import os
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,6 +27,7 @@ from scrapcut_cli.config import CalibrationConfig, ScrapcutConfig
 from scrapcut_cli.errors import CalibrationError
 
 if TYPE_CHECKING:
+    from scrapcut_cli.recording.mount import CameraMount
     from scrapcut_cli.recording.reader import Recording
 
 FloatArray = NDArray[np.float64]
@@ -179,3 +180,31 @@ def _links(rec: Recording, moving: str, camera: str) -> tuple[Link, ...]:
         Link(parent, child, rec.tf.lookup_one(parent, child, 0))
         for parent, child in itertools.pairwise(frames)
     )
+
+
+def camera_mount_for(
+    recording: str | os.PathLike[str],
+    config: ScrapcutConfig,
+    *,
+    progress: Callable[[int, int], None] | None = None,
+) -> tuple[CameraMount | None, dict[str, Any] | None]:
+    """The mount to pose ``recording``'s frames with, as ``config.calibration`` asks, and what
+    a path file records of it (``calibration``); (None, None): the recording's own.
+
+    ``file`` is read (a CAL.yaml); ``self_calibrate`` runs :func:`calibrate_recording` first.
+    """
+    from scrapcut_cli.calibration.calfile import mount_record, read_calibration_file
+    from scrapcut_cli.calibration.result import calibration_record
+
+    cal = config.calibration
+    if cal.file is not None and cal.self_calibrate:
+        raise CalibrationError(
+            "a calibration file and self-calibration exclude each other: use one"
+        )
+    if cal.file is not None:
+        mount = read_calibration_file(cal.file)
+        return mount, mount_record(mount, origin=cal.file)
+    if cal.self_calibrate:
+        calibration = calibrate_recording(recording, config=config, progress=progress)
+        return calibration.mount, calibration_record(calibration)
+    return None, None

@@ -489,11 +489,19 @@ def calibration_option(f: F) -> F:
     )(f)
 
 
-def load_calibration(path: Path | None) -> tuple[Any, dict[str, Any] | None]:
-    """(CameraMount or None, its record for the path file) of ``--calibration``."""
-    if path is None:
-        return None, None
-    from scrapcut_cli.calibration.calfile import mount_record, read_calibration_file
+def apply_calibration_options(
+    config: ScrapcutConfig, calibration_path: Path | None, self_calibrate: bool = False
+) -> ScrapcutConfig:
+    """``config`` with ``--calibration`` / ``--self-calibrate`` (``config.calibration``); the
+    file is read here so that a bad one fails before any frame is."""
+    if calibration_path is not None and self_calibrate:
+        raise click.UsageError("--self-calibrate estimates the calibration; drop --calibration")
+    if calibration_path is not None:
+        from scrapcut_cli.calibration.calfile import read_calibration_file
 
-    mount = read_calibration_file(path)
-    return mount, mount_record(mount, origin=str(path))
+        read_calibration_file(calibration_path)
+    return config.override(
+        "calibration",
+        file=None if calibration_path is None else str(calibration_path),
+        self_calibrate=True if self_calibrate else None,
+    )

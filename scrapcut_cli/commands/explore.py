@@ -10,8 +10,10 @@ import click
 
 from scrapcut_cli._io import real_path
 from scrapcut_cli.commands._options import (
+    apply_calibration_options,
     bounded,
     build_config,
+    calibration_option,
     config_option,
     config_type,
     mm_to_m,
@@ -120,6 +122,7 @@ METHODS = choice_names(FitMethod)
     "the planner used (scrapcut fit's job), and its error report PATH.error.json/.md.",
 )
 @click.option("--json", "as_json", is_flag=True, help="Print the run (summary and steps) as JSON.")
+@calibration_option
 @config_option
 @recording_options
 @paint_options
@@ -140,6 +143,7 @@ def explore(
     no_eval: bool,
     output: Path | None,
     as_json: bool,
+    calibration_path: Path | None,
     config_path: Path | None,
     **shared: Any,
 ) -> None:
@@ -151,7 +155,9 @@ def explore(
     runs with the given parameters over any recording's frames (a survey is dense enough) and
     reports the views it would take, the endpoints it finds and the coverage of the final fit.
     With -o, the global fit over the frames the planner used is written as a path file, with
-    its error report beside it when a reference is at hand.
+    its error report beside it when a reference is at hand. --calibration poses the frames of
+    the global fit (and of a what-if run) with a saved camera mount and clock offset; a replay
+    still checks each decision with the poses the planner had.
     """
     from scrapcut_cli.commands._console import err, progress
     from scrapcut_cli.pipeline.evaluate import check_reference_given
@@ -176,7 +182,7 @@ def explore(
         raise click.UsageError("--reference and --no-eval contradict each other")
     if output is not None and real_path(output) == real_path(recording):
         raise click.UsageError(f"{output} would overwrite the recording; choose another -o")
-    config = build_config(config_path, **shared)
+    config = apply_calibration_options(build_config(config_path, **shared), calibration_path)
     check_reference_given(reference)
 
     with progress("steps" if not what_if_mode else "frames") as bar:

@@ -13,11 +13,11 @@ import click
 
 from scrapcut_cli._io import real_path
 from scrapcut_cli.commands._options import (
+    apply_calibration_options,
     apply_stage_options,
     build_config,
     calibration_option,
     config_option,
-    load_calibration,
     paint_options,
     perception_options,
     recording_options,
@@ -169,6 +169,7 @@ def filter_cmd(
     base frame, voxel downsampling and statistical outlier removal. Frames without paint are
     counted, not fatal; a recording without any paint is an error that names the colours seen.
     """
+    from scrapcut_cli.calibration.recipe import camera_mount_for
     from scrapcut_cli.commands._console import err, out, progress
     from scrapcut_cli.perception.cloud import PerceptionTally, process_frame
     from scrapcut_cli.perception.paint import PAINT_PRESETS, resolve_recording_paint
@@ -178,7 +179,8 @@ def filter_cmd(
         _check_output(output, recording)
     stage, shared = split_stage_options(options)
     config = apply_stage_options(build_config(config_path, **shared), stage)
-    mount, _ = load_calibration(calibration_path)
+    config = apply_calibration_options(config, calibration_path)
+    mount, _ = camera_mount_for(recording, config)
 
     with open_recording(recording, config.recording, mount=mount) as rec:
         plan = rec.plan()

@@ -10,8 +10,10 @@ import click
 
 from scrapcut_cli._io import check_output_path, real_path
 from scrapcut_cli.commands._options import (
+    apply_calibration_options,
     apply_stage_options,
     build_config,
+    calibration_option,
     config_option,
     config_type,
     mm_to_m,
@@ -144,6 +146,13 @@ METHODS = choice_names(FitMethod)
     default=None,
     help="Cutting-speed CSV (default: the bundled oxy-fuel chart).",
 )
+@calibration_option
+@click.option(
+    "--self-calibrate",
+    is_flag=True,
+    help="Estimate the camera mount and clock offset from this scan first (scrapcut "
+    "calibrate) and pose the frames with them; recorded in the path file.",
+)
 @config_option
 @recording_options
 @paint_options
@@ -172,6 +181,8 @@ def fit(
     torch_length_mm: float | None,
     torch_radius_mm: float | None,
     speed_table: Path | None,
+    calibration_path: Path | None,
+    self_calibrate: bool,
     config_path: Path | None,
     **shared: Any,
 ) -> None:
@@ -224,6 +235,7 @@ def fit(
         torch_radius_m=mm_to_m(torch_radius_mm),
         speed_table=None if speed_table is None else str(speed_table),
     )
+    config = apply_calibration_options(config, calibration_path, self_calibrate)
 
     job = Job(
         recording,
@@ -311,6 +323,10 @@ def _render(summary: dict[str, Any]) -> None:
         ("error vs reference", error_text(summary["error"], summary["error_status"])),
         ("written", ", ".join(summary["outputs"])),
     ]
+    calibration = summary.get("calibration")
+    if calibration is not None:
+        text = calibration.get("verdict") or f"from {calibration['origin']}"
+        rows.insert(3, ("calibration", text))
     for key, value in rows:
         table.add_row(key, value)
     out.print(table)

@@ -11,11 +11,11 @@ import click
 
 from scrapcut_cli._io import check_output_path, real_path
 from scrapcut_cli.commands._options import (
+    apply_calibration_options,
     apply_stage_options,
     build_config,
     calibration_option,
     config_option,
-    load_calibration,
     paint_options,
     perception_options,
     recording_options,
@@ -155,6 +155,7 @@ def stitch(
     frame against the cloud first. The cloud's size and its growth per frame (Algorithm 1's
     size(k) - size(k-1)) are printed; --json adds them frame by frame.
     """
+    from scrapcut_cli.calibration.recipe import camera_mount_for
     from scrapcut_cli.commands._console import err, out, progress
     from scrapcut_cli.errors import PerceptionError
     from scrapcut_cli.perception.paint import resolve_recording_paint
@@ -170,7 +171,8 @@ def stitch(
             check_output_path(target)
     stage, shared = split_stage_options(options)
     config = apply_stage_options(build_config(config_path, **shared), stage)
-    mount, _ = load_calibration(calibration_path)
+    config = apply_calibration_options(config, calibration_path)
+    mount, _ = camera_mount_for(recording, config)
 
     with open_recording(recording, config.recording, mount=mount) as rec:
         plan = rec.plan()

@@ -575,7 +575,10 @@ def what_if(
     path = Path(recording)
     check_exploration_config(config)  # before minutes of perceiving every frame
     library: list[Observation] = []
-    with open_recording(path, config.recording) as rec:
+    from scrapcut_cli.calibration.recipe import camera_mount_for
+
+    mount, _ = camera_mount_for(path, config)
+    with open_recording(path, config.recording, mount=mount) as rec:
         hsv = resolve_recording_paint(config.paint, rec.metadata)
         total = rec.plan().usable
         last: FloatArray | None = None

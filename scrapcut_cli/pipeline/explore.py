@@ -14,7 +14,7 @@ from pathlib import Path
 from scrapcut_cli.config import FitMethod, ScrapcutConfig
 from scrapcut_cli.errors import ExplorationError
 from scrapcut_cli.exploration.replay import ExplorationRun
-from scrapcut_cli.pipeline.fit import StitchedRecording
+from scrapcut_cli.pipeline.fit import StitchedRecording, stitch_recording_file
 from scrapcut_cli.pipeline.job import Job, JobResult, Pipeline, run_job
 
 
@@ -42,6 +42,10 @@ def stitched_from_run(run: ExplorationRun) -> StitchedRecording:
     )
 
 
+def _calibrated(config: ScrapcutConfig) -> bool:
+    return config.calibration.file is not None or config.calibration.self_calibrate
+
+
 def fit_exploration(
     run: ExplorationRun,
     *,
@@ -54,6 +58,8 @@ def fit_exploration(
 
     The planner's perception and stitching are the run's (``run.settings``); the fitters', the
     tool path's and the evaluation's parameters come from ``config`` (default the run's own).
+    A calibration in ``config`` poses the frames of a replay again for the fit (a what-if run
+    was posed with it from the start).
     With ``output`` the path file and its error report are written, and a known failure raises;
     without, a failure (the global fit broke) is returned as ``result.failure``.
     """
@@ -78,6 +84,19 @@ def fit_exploration(
         evaluate=evaluate,
     )
     stitched = stitched_from_run(run)
+    if config is not None and run.mode == "replay" and _calibrated(config):
+        # The replay checks the decisions with the poses the planner had; the global fit
+        # poses the same frames with the calibration.
+        settings = replace(settings, calibration=config.calibration)
+        job = replace(job, config=settings)
+        stitched = stitch_recording_file(
+            run.source, config=settings, stamps_ns={s.stamp_ns for s in run.steps}
+        )
+    elif config is not None and config.calibration.file is not None:
+        # A what-if run read its frames through the calibration already: record which.
+        from scrapcut_cli.calibration.recipe import camera_mount_for
+
+        stitched = replace(stitched, calibration=camera_mount_for(run.source, config)[1])
     if output is not None:
         return Pipeline(job, stitched=stitched).run()
     return run_job(job, stitched=stitched)

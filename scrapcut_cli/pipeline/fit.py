@@ -15,7 +15,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -61,6 +61,9 @@ class FitResult:
         Stamp of the last frame (exports are stamped with it).
     timings_s : dict
         Wall time of ``read_stitch``, ``fit``, ``toolpath`` and ``total``, seconds.
+    calibration : dict, optional
+        The camera mount and clock offset the frames were posed with, when not the
+        recording's own (the path file's ``calibration``).
     """
 
     curve: Curve
@@ -75,6 +78,7 @@ class FitResult:
     reader_skip_reasons: dict[str, int] = field(default_factory=dict)
     stamp_ns: int = 0
     timings_s: dict[str, float] = field(default_factory=dict)
+    calibration: dict[str, Any] | None = None
 
     @property
     def method_params(self) -> dict[str, Any]:
@@ -99,6 +103,7 @@ class FitResult:
             config=self.config.to_dict(),
             frame_id=self.frame_id,
             created=created,
+            calibration=self.calibration,
         )
 
     def summary(self) -> dict[str, Any]:
@@ -138,6 +143,7 @@ class FitResult:
             "pierce_s": info.get("pierce_s"),
             "cut_time_s": info.get("cut_time_s"),
             "time_s": dict(self.timings_s),
+            "calibration": self.calibration,
         }
 
 
@@ -156,6 +162,7 @@ class StitchedRecording:
     reader_skip_reasons: dict[str, int]
     stamp_ns: int
     time_s: float
+    calibration: dict[str, Any] | None = None
 
 
 def stitch_recording_file(
@@ -163,19 +170,25 @@ def stitch_recording_file(
     *,
     config: ScrapcutConfig,
     progress: Callable[[int, int], None] | None = None,
+    stamps_ns: Collection[int] | None = None,
 ) -> StitchedRecording:
-    """Read a recording and stitch its paint and surface clouds.
+    """Read a recording and stitch its paint and surface clouds (only the frames with these
+    header ``stamps_ns``, when given: an exploration's own views).
 
     The paint defaults to the recording's own (simulator metadata) unless ``config.paint`` was
-    set. ``progress(frames_done, frames_total)`` is called after each frame.
+    set. ``progress(frames_done, frames_total)`` is called after each frame. Frames are posed
+    with the calibration ``config.calibration`` names (a file, or estimated from the recording
+    first); the result keeps its record for the path file.
     """
+    from scrapcut_cli.calibration.recipe import camera_mount_for
     from scrapcut_cli.perception.paint import resolve_recording_paint
     from scrapcut_cli.perception.stitch import stitch_recording
     from scrapcut_cli.recording.reader import open_recording, sha256_first_mib
 
     t0 = time.perf_counter()
     path = Path(recording)
-    with open_recording(path, config.recording) as rec:
+    mount, calibration = camera_mount_for(path, config, progress=progress)
+    with open_recording(path, config.recording, mount=mount) as rec:
         plan = rec.plan()
         hsv = resolve_recording_paint(config.paint, rec.metadata)
         frame_id = rec.base_frame
@@ -187,7 +200,11 @@ def stitch_recording_file(
             if progress is not None:
                 progress(done, plan.usable)
 
-        stitch = stitch_recording(rec.frames(), hsv, config, progress=step)
+        frames = rec.frames()
+        if stamps_ns is not None:
+            wanted = set(stamps_ns)
+            frames = (f for f in frames if f.stamp_ns in wanted)
+        stitch = stitch_recording(frames, hsv, config, progress=step)
     tally = stitch.tally
     source = {
         "path": str(path),
@@ -203,6 +220,7 @@ def stitch_recording_file(
         reader_skip_reasons=dict(plan.skip_reasons),
         stamp_ns=max((s.stamp_ns for s in stitch.steps), default=0),
         time_s=time.perf_counter() - t0,
+        calibration=calibration,
     )
 
 
@@ -261,6 +279,7 @@ def fit_stitched(
             "toolpath": t2 - t1,
             "total": stitched.time_s + (t2 - t0),
         },
+        calibration=stitched.calibration,
     )
 
 
