@@ -83,7 +83,7 @@ PARALLEL_VIEWS = tuple(dict(x_m=x) for x in (-0.1, -0.06, -0.02, 0.02, 0.06, 0.1
 class CalibrationScan:
     """Rest views joined by minimum-jerk moves; frames at rest and (``moving_fps``) in motion."""
 
-    views: Sequence[dict[str, float]] = DIVERSE_VIEWS
+    views: Sequence[dict[str, float] | FloatArray] = DIVERSE_VIEWS  # look_down args or poses
     error: FloatArray = field(default_factory=lambda: np.eye(4))  # true = published @ error
     stamp_offset_s: float = 0.0  # header stamp = capture time + this
     moving_fps: float = 0.0  # images per second while moving (0: at rest only)
@@ -102,7 +102,9 @@ class CalibrationScan:
         self.reference = _top_line(120, length_m=0.34)
         M_inv = invert_transform(PUBLISHED_MOUNT)
         # The robot goes where the published mount says the views are.
-        self.flanges = [look_down(**v) @ M_inv for v in self.views]
+        self.flanges = [
+            (look_down(**v) if isinstance(v, dict) else np.asarray(v)) @ M_inv for v in self.views
+        ]
 
     @property
     def true_mount(self) -> FloatArray:
