@@ -5,8 +5,11 @@ right camera mount and clock offset they coincide, with wrong ones they disagree
 depends on the pose. Import submodules directly:
 
 - ``observations``: per frame, surface samples with normals and paint-edge points (camera frame);
-- ``solver``: pairs of overlapping frames, point-to-plane and paint-edge residuals, robust
-  Gauss-Newton, eigen-analysis of the normal equations (observability), sigma per parameter;
+- ``residuals``: the problem: frames posed with a candidate mount and clock offset, which
+  frames overlap, point-to-plane and paint-edge residuals with analytic Jacobians, weights;
+- ``solver``: robust Gauss-Newton, eigen-analysis of the normal equations (observability),
+  unobservable directions held at the published values, sigma per parameter;
+- ``explain``: why a direction is unobservable, in words;
 - ``result``: the Calibration (mount to use, consistent or corrected, ``--json`` keys);
 - ``calfile``: CAL.yaml with static_transform_publisher lines; reading it back;
 - ``recipe``: ``calibrate_recording`` (reads a recording, the only I/O besides ``calfile``).

@@ -21,8 +21,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from scrapcut_cli.calibration.observations import FrameObservation, observe_frame
+from scrapcut_cli.calibration.residuals import TYPICAL_ERROR, VELOCITY_STEP_NS
 from scrapcut_cli.calibration.result import Calibration, Link
-from scrapcut_cli.calibration.solver import TYPICAL_ERROR, VELOCITY_STEP_NS, solve
+from scrapcut_cli.calibration.solver import solve
 from scrapcut_cli.config import CalibrationConfig, ScrapcutConfig
 from scrapcut_cli.errors import CalibrationError
 

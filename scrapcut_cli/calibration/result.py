@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from scrapcut_cli.calibration.solver import PARAMETERS, Solution, corrected_mount
+from scrapcut_cli.calibration.residuals import PARAMETERS, corrected_mount
+from scrapcut_cli.calibration.solver import Solution
 from scrapcut_cli.config import CalibrationConfig
 from scrapcut_cli.geometry import matrix_to_quat_xyzw
 from scrapcut_cli.recording.mount import CameraMount
