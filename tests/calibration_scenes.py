@@ -13,6 +13,7 @@ published mount on /tf_static, as a real recording holds it.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -159,6 +160,12 @@ class CalibrationScan:
                 times += [start + (j + 0.5) * self.move_s / n for j in range(n)]
         return sorted(times)
 
+    def rest_indices(self) -> set[int]:
+        """Indices of the frames taken at rest (one per view)."""
+        period = self.rest_s + self.move_s
+        rests = {round(k * period + 0.5 * self.rest_s, 9) for k in range(len(self.views))}
+        return {i for i, t in enumerate(self.capture_times()) if round(t, 9) in rests}
+
     def frames(self) -> list[Frame]:
         """Rendered frames, stamped on the camera's clock, posed as a reader would pose them
         with the published mount (the calibration must not see the truth)."""
@@ -188,9 +195,15 @@ class CalibrationScan:
         return out
 
 
-def write_calibration_recording(path: str | Path, scan: CalibrationScan) -> list[Frame]:
+def write_calibration_recording(
+    path: str | Path, scan: CalibrationScan, *, reasons: Sequence[str] = ()
+) -> list[Frame]:
     """The scan as an MCAP: /tf link0 -> link8 at 100 Hz, the published mount on /tf_static
-    (link8 -> camera_link -> optical frame), 16UC1 depth, orange paint. Returns the frames."""
+    (link8 -> camera_link -> optical frame), 16UC1 depth, orange paint. Returns the frames.
+
+    ``reasons``: also an exploration log, one entry per view (its rest frame's stamp and the
+    reason of the decision taken there), as the planner writes on /scrapcut/exploration.
+    """
     from scrapcut_cli.recording.writer import McapWriter
 
     frames = scan.frames()
@@ -225,4 +238,8 @@ def write_calibration_recording(path: str | Path, scan: CalibrationScan) -> list
                 "/camera/camera/aligned_depth_to_color/image_raw", stamp, CAMERA_FRAME, depth_mm
             )
         writer.write_path("/scrapcut/reference", T0_NS, "panda_link0", scan.reference)
+        rest = [f for f in frames if f.index in scan.rest_indices()]
+        for k, (frame, reason) in enumerate(zip(rest, reasons, strict=False)):
+            entry = {"k": k, "frame_stamp_ns": frame.stamp_ns, "reason": reason}
+            writer.write_string("/scrapcut/exploration", frame.stamp_ns + 1, json.dumps(entry))
     return frames

@@ -2,17 +2,24 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pytest
-from calibration_scenes import PARALLEL_VIEWS, CalibrationScan, look_down, mount_error
+from calibration_scenes import (
+    PARALLEL_VIEWS,
+    CalibrationScan,
+    look_down,
+    mount_error,
+    write_calibration_recording,
+)
+from click.testing import CliRunner
 from perception_scenes import CYLINDER_AXIS_YZ, CYLINDER_RADIUS_M, NOISY
 from scipy.spatial.transform import Rotation
 
-from scrapcut_cli.calibration.observations import observe_frame
-from scrapcut_cli.calibration.solver import solve
-from scrapcut_cli.config import CalibrationConfig, PaintConfig, PerceptionConfig
-from scrapcut_cli.exploration.calibration_views import calibration_view_poses
-from scrapcut_cli.perception.paint import resolve_paint
+from scrapcut_cli.cli import cli
+from scrapcut_cli.exploration.calibration_views import CALIBRATION_REASON, calibration_view_poses
 
 TARGET = np.array([0.0, CYLINDER_AXIS_YZ[0], CYLINDER_AXIS_YZ[1] + CYLINDER_RADIUS_M])
 
@@ -38,9 +45,11 @@ def test_views_look_at_the_target_from_tilted_rolled_directions() -> None:
     assert calibration_view_poses(TARGET, [0, 0, 1], [1, 0, 0], count=0, distance_m=0.3) == []
 
 
-def test_calibration_views_make_translation_and_clock_observable() -> None:
-    # Four of the parallel views of the solver tests (translation and clock unobservable), then
-    # three calibration views of the middle, and a frame on each move.
+def test_calibration_views_make_the_mount_observable_and_calibrate_says_how_much(
+    tmp_path: Path,
+) -> None:
+    # Four of the solver tests' parallel views (translation and clock unobservable), then three
+    # calibration views of the middle, one frame on each move; the log marks them.
     extra = calibration_view_poses(
         TARGET, [0, 0, 1], [1, 0, 0], count=3, distance_m=0.28, tilt_deg=25.0
     )
@@ -52,12 +61,24 @@ def test_calibration_views_make_translation_and_clock_observable() -> None:
         moving_fps=2.0,
         noise=NOISY,
     )
-    hsv = resolve_paint(PaintConfig(preset="orange"))
-    config = CalibrationConfig()
-    obs = [
-        observe_frame(f, hsv, config=config, perception=PerceptionConfig()) for f in scan.frames()
-    ]
-    solution = solve(obs, scan.trajectory, scan.published, config)
-    assert solution.observable.all(), [d.what for d in solution.unobservable]
-    np.testing.assert_allclose(solution.correction[:3], (1.5, -1.0, 0.8), atol=0.35)
-    assert solution.correction[6] == pytest.approx(-15.0, abs=1.0)
+    reasons = ["extrapolate"] * 3 + [CALIBRATION_REASON] * 3 + ["done"]
+    path = tmp_path / "scan.mcap"
+    write_calibration_recording(path, scan, reasons=reasons)
+    result = CliRunner().invoke(cli, ["calibrate", str(path), "--json"], catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert data["observable"] == {
+        "translation": [True, True, True],
+        "rotation": [True, True, True],
+        "time_offset": True,
+    }
+    effect = data["calibration_views"]
+    # Sliding along the pipe hid the translation and the rotation about the pipe; the frames
+    # on the moves between the parallel views already showed the clock.
+    assert set(effect["became_observable"]) == {"tx_mm", "ty_mm", "tz_mm", "ry_deg"}
+    assert effect["frames"] == 6  # three views and the frame on each move to them
+    ratio = dict(zip(effect["units"], effect["sigma_ratio"], strict=True))
+    assert ratio["rx_deg"] > 1.0  # observable before, narrowed by the views
+    t = np.array(data["correction"]["translation_m"]) * 1000.0
+    np.testing.assert_allclose(t, (1.5, -1.0, 0.8), atol=0.35)
+    assert data["correction"]["time_offset_s"] == pytest.approx(-0.015, abs=0.001)

@@ -26,6 +26,7 @@ from scrapcut_cli.calibration.result import Calibration, Link
 from scrapcut_cli.calibration.solver import solve
 from scrapcut_cli.config import CalibrationConfig, ScrapcutConfig
 from scrapcut_cli.errors import CalibrationError
+from scrapcut_cli.exploration.calibration_views import CALIBRATION_REASON
 
 if TYPE_CHECKING:
     from scrapcut_cli.recording.mount import CameraMount
@@ -112,21 +113,37 @@ def calibrate_recording(
         hsv = resolve_recording_paint(config.paint, rec.metadata)
         velocities = _velocities(rec.moving_poses, plan.stamps_ns)
         chosen = choose_frames(plan.T_base_cam, velocities, cal.max_frames)
-        wanted = set(chosen.tolist())
-        observations: list[FrameObservation] = []
+        # An exploration with calibration views: also solve without them, to say what they gave.
+        split = calibration_views_start(rec.exploration_log())
+        before: NDArray[np.int64] | None = None
+        if split is not None:
+            early = np.flatnonzero(plan.stamps_ns <= split)
+            before = early[choose_frames(plan.T_base_cam[early], velocities[early], cal.max_frames)]
+        wanted = set(chosen.tolist()) | set(() if before is None else before.tolist())
+        observed: dict[int, FrameObservation] = {}
         for frame in rec.frames():
             if frame.index not in wanted:
                 continue
-            observations.append(observe_frame(frame, hsv, config=cal, perception=config.perception))
+            observed[frame.index] = observe_frame(
+                frame, hsv, config=cal, perception=config.perception
+            )
             if progress is not None:
-                progress(len(observations), len(chosen))
-        solution = solve(observations, rec.moving_poses, published, cal)
+                progress(len(observed), len(wanted))
+        solution = solve([observed[i] for i in chosen], rec.moving_poses, published, cal)
+        without = None
+        if before is not None:
+            try:
+                without = solve([observed[i] for i in before], rec.moving_poses, published, cal)
+            except CalibrationError:
+                without = None  # too little before the calibration views to compare
         links = _links(rec, published.moving_frame, published.camera_frame)
     source = {
         "path": str(path),
         "frames": int(plan.usable),
-        "frames_read": len(observations),
+        "frames_read": len(observed),
     }
+    if split is not None:
+        source["calibration_view_frames"] = int(np.count_nonzero(plan.stamps_ns > split))
     return Calibration.decide(
         solution,
         published,
@@ -134,7 +151,17 @@ def calibrate_recording(
         links=links,
         source=source,
         time_s=time.perf_counter() - t0,
+        without_views=without,
     )
+
+
+def calibration_views_start(log: list[dict[str, Any]]) -> int | None:
+    """Header stamp (ns) of the frame after which an exploration went for calibration views:
+    the frame of the first step that decided ``calibration``; None if none did."""
+    for entry in log:
+        if entry.get("reason") == CALIBRATION_REASON and "frame_stamp_ns" in entry:
+            return int(entry["frame_stamp_ns"])
+    return None
 
 
 def _check(cal: CalibrationConfig) -> None:

@@ -60,6 +60,8 @@ class Calibration:
         ``path`` and frame counts of the recording it came from.
     time_s : float
         Wall time of the whole calibration.
+    without_views : Solution, optional
+        The same solve without an exploration's calibration views (what they narrowed).
     """
 
     published: CameraMount
@@ -69,6 +71,7 @@ class Calibration:
     links: tuple[Link, ...] = ()
     source: dict[str, Any] = field(default_factory=dict)
     time_s: float = 0.0
+    without_views: Solution | None = None
 
     @staticmethod
     def decide(
@@ -79,6 +82,7 @@ class Calibration:
         links: tuple[Link, ...] = (),
         source: dict[str, Any] | None = None,
         time_s: float = 0.0,
+        without_views: Solution | None = None,
     ) -> Calibration:
         """Apply the consistency rule of the module docstring to ``solution``."""
         floor = np.array(
@@ -97,6 +101,7 @@ class Calibration:
             links=links,
             source=dict(source or {}),
             time_s=time_s,
+            without_views=without_views,
         )
 
     @property
@@ -193,6 +198,31 @@ class Calibration:
             "iterations": s.iterations,
             "eigen": s.eigen,
             "time_s": self.time_s,
+            "calibration_views": self.views_effect(),
+        }
+
+    def views_effect(self) -> dict[str, Any] | None:
+        """What an exploration's calibration views changed: sigma without them, its ratio to
+        sigma with them per parameter (> 1: narrowed), parameters they made observable."""
+        w = self.without_views
+        if w is None:
+            return None
+        s = self.solution
+        ratio = [
+            None if not (math.isfinite(a) and math.isfinite(b) and b > 0) else float(a / b)
+            for a, b in zip(w.sigma, s.sigma, strict=True)
+        ]
+        return {
+            "frames": self.source.get("calibration_view_frames"),
+            "sigma_without": [None if not math.isfinite(v) else float(v) for v in w.sigma],
+            "sigma_ratio": ratio,
+            "observable_without": [bool(v) for v in w.observable],
+            "became_observable": [
+                p
+                for p, a, b in zip(PARAMETERS, w.observable, s.observable, strict=True)
+                if b and not a
+            ],
+            "units": list(PARAMETERS),
         }
 
 

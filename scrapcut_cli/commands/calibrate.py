@@ -138,6 +138,15 @@ def _render(result: Calibration) -> None:
     ]
     for u in s.unobservable:
         rows.append(("not observable", f"{u.what}: {u.why}"))
+    effect = data["calibration_views"]
+    if effect is not None:
+        ratios = [r for r in effect["sigma_ratio"] if r is not None]
+        text = f"{effect['frames']} frames"
+        if ratios:
+            text += f"; sigma narrowed {min(ratios):.1f}x to {max(ratios):.1f}x"
+        if effect["became_observable"]:
+            text += f"; made observable: {', '.join(effect['became_observable'])}"
+        rows.append(("calibration views", text))
     t = data["T_moving_camera"]
     rows += [
         (

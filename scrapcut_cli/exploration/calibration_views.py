@@ -21,6 +21,8 @@ from scrapcut_cli.exploration.views import tilt_up, unit, view_pose
 
 FloatArray = NDArray[np.float64]
 
+#: The planner's reason for a calibration view (its log entries; ``calibrate`` looks for it).
+CALIBRATION_REASON = "calibration"
 #: Roll step between successive views: the golden angle spreads any number of rolls evenly.
 GOLDEN_ANGLE_DEG = 180.0 * (3.0 - math.sqrt(5.0))
 
