@@ -676,6 +676,18 @@ class ExplorationConfig:
     observed_end_tolerance_m: float = rng(
         0.01, 1e-4, 0.5, "m", "under 0.1 mm no depth agrees; over 0.5 m every depth does"
     )
+    # After both ends: this many views of the initial stretch, tilted round its normal and
+    # rolled, so that the hand-eye and clock self-calibration can see every direction.
+    calibration_views: int = rng(
+        0, 0, 12, "", "a dozen views already turn the camera about every axis"
+    )
+    calibration_tilt_deg: float = rng(
+        30.0,
+        5.0,
+        60.0,
+        "deg",
+        "under 5 deg the views barely turn; over 60 they see the paint edge-on",
+    )
 
 
 @dataclass(frozen=True)

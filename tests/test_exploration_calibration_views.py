@@ -15,11 +15,15 @@ from calibration_scenes import (
     write_calibration_recording,
 )
 from click.testing import CliRunner
+from exploration_scenes import REACH_ALL, CylinderScan, explore
 from perception_scenes import CYLINDER_AXIS_YZ, CYLINDER_RADIUS_M, NOISY
 from scipy.spatial.transform import Rotation
 
 from scrapcut_cli.cli import cli
+from scrapcut_cli.config import ScrapcutConfig
 from scrapcut_cli.exploration.calibration_views import CALIBRATION_REASON, calibration_view_poses
+from scrapcut_cli.exploration.planner import ExplorationPlanner
+from scrapcut_cli.perception.paint import PAINT_PRESETS
 
 TARGET = np.array([0.0, CYLINDER_AXIS_YZ[0], CYLINDER_AXIS_YZ[1] + CYLINDER_RADIUS_M])
 
@@ -82,3 +86,31 @@ def test_calibration_views_make_the_mount_observable_and_calibrate_says_how_much
     t = np.array(data["correction"]["translation_m"]) * 1000.0
     np.testing.assert_allclose(t, (1.5, -1.0, 0.8), atol=0.35)
     assert data["correction"]["time_offset_s"] == pytest.approx(-0.015, abs=0.001)
+
+
+def test_the_planner_ends_with_calibration_views_of_the_first_stretch() -> None:
+    scan = CylinderScan()
+    config = ScrapcutConfig().override("exploration", calibration_views=3)
+    planner = ExplorationPlanner(
+        scan.initial_view, reachable=REACH_ALL, hsv=PAINT_PRESETS["orange"].hsv, config=config
+    )
+    loop = explore(planner, scan)
+    reasons = [d.reason for d in loop.decisions]
+    assert reasons[-4:] == [CALIBRATION_REASON] * 3 + ["done"]
+    assert CALIBRATION_REASON not in reasons[:-4] and planner.endpoints_found == 2
+    views = [d.T_base_cam for d in loop.decisions if d.reason == CALIBRATION_REASON]
+    # All look at one point of the first view's paint, from directions 30 deg off the pipe's
+    # top normal (+z there) and at different rolls.
+    eye0, axis0 = scan.initial_view[:3, 3], scan.initial_view[:3, 2]
+    targets = []
+    for T in views:
+        assert T is not None
+        # Where the optical axis meets the horizontal plane of the pipe's top.
+        t = (CYLINDER_AXIS_YZ[1] + CYLINDER_RADIUS_M - T[2, 3]) / T[2, 2]
+        targets.append(T[:3, 3] + t * T[:3, 2])
+        assert np.degrees(np.arccos(-T[2, 2])) == pytest.approx(30.0, abs=3.0)
+    assert np.ptp(np.array(targets), axis=0).max() < 0.005
+    t0 = (targets[0][2] - eye0[2]) / axis0[2]
+    assert np.linalg.norm(eye0 + t0 * axis0 - targets[0]) < 0.03
+    x_axes = np.array([T[:3, 0] for T in views if T is not None])
+    assert np.abs(x_axes @ x_axes.T - np.eye(3)).max() < 0.99  # no two rolls alike

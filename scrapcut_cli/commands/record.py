@@ -97,6 +97,13 @@ METHODS = choice_names(FitMethod)
     help="Depth image encoding: millimetres as realsense-ros, or float metres (default 16UC1).",
 )
 @click.option(
+    "--calibration-views",
+    type=config_type("exploration.calibration_views"),
+    default=None,
+    help="Explore mode: after both ends, this many views of the first stretch, tilted and "
+    "rolled, so that scrapcut calibrate can see every direction of the mount (default 0).",
+)
+@click.option(
     "--hand-eye-error-mm",
     type=config_type("sim.hand_eye_error_m", 1e-3),
     default=None,
@@ -147,6 +154,7 @@ def record(
     distance_mm: float | None,
     start_fraction: float | None,
     depth_encoding: str | None,
+    calibration_views: int | None,
     hand_eye_error_mm: float | None,
     hand_eye_error_deg: float | None,
     stamp_offset_ms: float | None,
@@ -180,7 +188,7 @@ def record(
         )
 
     config = build_config(config_path, paint=paint, hsv=hsv)
-    config = config.override("exploration", method=method)
+    config = config.override("exploration", method=method, calibration_views=calibration_views)
     config = config.override(
         "sim",
         object=object_name,

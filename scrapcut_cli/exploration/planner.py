@@ -49,6 +49,11 @@ edge); the evidence, for or against, is logged with the step (``end_evidence``) 
 entry names the frame (``observed_by``). Otherwise the direction ends with
 ``no_feasible_view``.
 
+Calibration views (``calibration_views`` > 0): once both directions are done, the planner
+visits that many views of the initial stretch of paint, tilted round its normal by
+``calibration_tilt_deg`` and rolled (:mod:`.calibration_views`), before it stops; their log
+entries have the reason ``calibration``, and ``scrapcut calibrate`` reports what they added.
+
 Every decision carries its log entry (``Decision.info``, JSON-ready): k, frame, growth, size,
 endpoints found, the executed pose (the frame's) and the planned one, the reason, and every
 reachability query with its answer, so a replay can answer them without the simulator.
@@ -76,6 +81,7 @@ from scrapcut_cli.cell import (
 )
 from scrapcut_cli.config import FitMethod, ScrapcutConfig, SkeletonConfig, choice_names
 from scrapcut_cli.errors import ExplorationError, FittingError, PerceptionError
+from scrapcut_cli.exploration.calibration_views import CALIBRATION_REASON, calibration_view_poses
 from scrapcut_cli.exploration.evidence import DepthView, EndEvidence, depth_view, end_evidence
 from scrapcut_cli.exploration.occupancy import OccupancyMap, depth_points
 from scrapcut_cli.exploration.views import (
@@ -404,6 +410,9 @@ class ExplorationPlanner:
         self._depth_views: list[DepthView] = []
         self._depth_steps: list[int] = []
         self._evidence_notes: list[dict[str, Any]] = []
+        self._final_reason = "done"
+        self._calibration_target = np.zeros(3)
+        self._calibration_poses: list[FloatArray] = []
 
     @property
     def total(self) -> int:
@@ -534,6 +543,8 @@ class ExplorationPlanner:
             self._initial_ends = [self._end_of(curve, "end"), self._end_of(curve, "start")]
             self._direction = 0
             return self._advance(self._initial_ends[0])
+        if pending == CALIBRATION_REASON:
+            return self._next_calibration_view()
         if pending == "return":
             end = self._extend(self._initial_ends[1], obs)
             return self._advance(self._initial_ends[1] if end is None else end)
@@ -707,7 +718,10 @@ class ExplorationPlanner:
         if reason in ENDPOINT_REASONS:
             self.endpoints_found += 1
         if self._direction == 1:
-            return self._stop("done" if self.endpoints_found == 2 else reason)
+            final = "done" if self.endpoints_found == 2 else reason
+            if self.config.exploration.calibration_views > 0:
+                return self._start_calibration_views(final)
+            return self._stop(final)
         self._direction = 1
         self._frontier = self._initial_ends[1]
         if self._pending in ("initial", "return"):
@@ -715,6 +729,56 @@ class ExplorationPlanner:
             return self._advance(self._initial_ends[1])
         self._pending = "return"
         return Decision(self.initial_view.copy(), reason, info={"action": "return"})
+
+    # ------------------------------------------------------------------ calibration views
+
+    def _start_calibration_views(self, final: str) -> Decision:
+        """Both directions are done: views of the initial stretch for the self-calibration
+        (:mod:`.calibration_views`), then stop with ``final``.
+
+        The target is the stitched paint nearest the initial view's optical axis (seen first,
+        so surely paint); the views look at it from the surface normal tilted round it and
+        rolled, each at the initial view's distance or the nearest feasible one.
+        """
+        c = self.config.exploration
+        self._final_reason = final
+        self._calibration_poses = []
+        paint = self.stitcher.paint_points
+        if len(paint) == 0:
+            return self._stop(final)
+        eye, axis = self.initial_view[:3, 3], self.initial_view[:3, 2]
+        rel = paint - eye
+        off_axis = np.linalg.norm(rel - np.outer(rel @ axis, axis), axis=1)
+        target = paint[int(np.argmin(off_axis))]
+        normal = self._normal_at(target, fallback=target)
+        near = paint[np.linalg.norm(paint - target, axis=1) <= 0.03]
+        along = self.initial_view[:3, 0]
+        if len(near) >= 3:
+            _, _, vt = np.linalg.svd(near - near.mean(axis=0), full_matrices=False)
+            along = vt[0]
+        distance = float(np.clip(np.linalg.norm(target - eye), c.min_distance_m, c.max_distance_m))
+        self._calibration_target = target
+        self._calibration_poses = calibration_view_poses(
+            target,
+            normal,
+            along,
+            count=c.calibration_views,
+            distance_m=distance,
+            tilt_deg=c.calibration_tilt_deg,
+        )
+        return self._next_calibration_view()
+
+    def _next_calibration_view(self) -> Decision:
+        """The next feasible calibration view (its roll kept if the cell allows), or stop."""
+        while self._calibration_poses:
+            wanted = self._calibration_poses.pop(0)
+            outward = -wanted[:3, 2]
+            T = self.find_view(self._calibration_target, outward, wanted[:3, 0])
+            if T is not None:
+                self._pending = CALIBRATION_REASON
+                info = {"action": CALIBRATION_REASON, "left": len(self._calibration_poses)}
+                return Decision(T, CALIBRATION_REASON, info=info)
+        return self._stop(self._final_reason)
 
     def _stop(self, reason: str) -> Decision:
         self.finished = True
