@@ -268,7 +268,7 @@ def test_frames_while_moving_are_rendered_at_the_capture_time_the_truth_names(
         hand_eye_error_m=0.001,
         hand_eye_error_deg=0.2,
         stamp_offset_s=0.012,
-        motion_frames_hz=10.0,
+        motion_frames_hz=2.0,
     )
     result = record(config, path)
     assert result.moving_frames >= 5 and result.frames == result.views + result.moving_frames
@@ -277,8 +277,8 @@ def test_frames_while_moving_are_rendered_at_the_capture_time_the_truth_names(
         published = rec.published_mount()
         stamps = rec.plan().stamps_ns
     assert truth["time_offset_s"] == -0.012 and truth["moving_frame"] == "panda_link8"
-    # On the camera's clock: 100 ms apart while moving (the rest frames interleave).
-    assert np.count_nonzero(np.diff(stamps) == 100_000_000) >= result.moving_frames - 3
+    # On the camera's clock: 500 ms apart while moving (the rest frames interleave).
+    assert np.count_nonzero(np.diff(stamps) == 500_000_000) >= result.moving_frames - 3
     true_mount = CameraMount(
         published.moving_frame,
         published.camera_frame,
