@@ -1,4 +1,5 @@
-"""Tests of scrapcut_cli.sim.observed: the simulated cell's obstacles from depth images."""
+"""Tests of scrapcut_cli.sim.observed: the simulated cell's obstacles from depth images: the
+observed surface, the space seen free, and the unknown band around the surface."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ from collections import Counter
 
 import numpy as np
 
-from scrapcut_cli.geometry import look_at, unpack_voxel_keys
+from scrapcut_cli.geometry import look_at, pack_voxel_keys, unpack_voxel_keys
 from scrapcut_cli.recording.frame import Frame
 from scrapcut_cli.sim.camera import d435i_color_camera
 from scrapcut_cli.sim.observed import ObservedScene
@@ -43,21 +44,48 @@ def test_the_floor_is_left_to_the_cell_and_invalid_depth_is_ignored() -> None:
     assert set(cells[:, 2]) == {15}  # the box's top only: no floor cells
 
 
+def _has(keys: np.ndarray, point: tuple[float, float, float]) -> bool:
+    key = pack_voxel_keys(np.floor(np.asarray([point]) / 0.01).astype(np.int64))[0]
+    return bool(np.isin(key, keys))
+
+
+def test_space_near_the_surface_is_free_only_where_rays_crossed_it() -> None:
+    """A table top 0.155 m high seen from 0.3 m above its middle: the air above it is seen
+    free; below it (its inside) and just past the image's edge it is unknown and counts as an
+    obstacle, within the 5 cm band; farther out nothing is assumed."""
+    scene = ObservedScene()
+    scene.add(_looking_down(np.full((120, 160), 0.3, dtype=np.float32), 0.455))
+    obstacles = scene.obstacle_keys()
+    cells = unpack_voxel_keys(scene.keys)
+    x_edge = (cells[:, 0].max() + 1) * 0.01  # where the image's view of the top ends
+    assert _has(obstacles, (0.5, 0.0, 0.155))  # the surface
+    assert _has(scene.free, (0.5, 0.0, 0.20)) and not _has(obstacles, (0.5, 0.0, 0.20))
+    assert _has(obstacles, (0.5, 0.0, 0.125))  # 3 cm inside the top: unknown
+    assert _has(obstacles, (x_edge + 0.03, 0.0, 0.155))  # 3 cm past the seen edge
+    assert not _has(obstacles, (x_edge + 0.08, 0.0, 0.155))  # 8 cm past it: not assumed
+    assert not _has(obstacles, (0.5, 0.0, 0.09))  # 6.5 cm under the top: not assumed
+    # A second view from the side sees into the band past the edge: that space becomes free.
+    side = look_at((x_edge + 0.25, 0.0, 0.30), (x_edge + 0.03, 0.0, 0.0), up_hint=(0.0, 0.0, 1.0))
+    floor = np.full((120, 160), np.nan, dtype=np.float32)
+    frame = _looking_down(floor, 0.455)
+    depth = np.full((120, 160), float(np.linalg.norm(side[:3, 3] - (x_edge + 0.03, 0.0, 0.0))))
+    scene.add(Frame(1, 2, frame.color, depth.astype(np.float32), frame.camera, side))
+    assert not _has(scene.obstacle_keys(), (x_edge + 0.03, 0.0, 0.155))
+
+
 def test_the_mesh_is_the_closed_boundary_of_the_voxels() -> None:
     scene = ObservedScene()
     assert scene.mesh()[1].shape == (0, 3)
     depth = np.full((12, 16), 0.3, dtype=np.float32)
     scene.add(_looking_down(depth, 0.455))
     vertices, faces = scene.mesh()
-    n = len(scene)
-    cells = unpack_voxel_keys(scene.keys)
-    # Every voxel has its top and bottom exposed; a one-layer sheet shares its side faces.
-    assert len(faces) >= 4 * n and len(faces) % 2 == 0
-    # Closed and consistent: every edge is shared by exactly two triangles.
+    cells = unpack_voxel_keys(scene.obstacle_keys())
+    assert len(faces) > 0 and len(faces) % 2 == 0  # two triangles per exposed face
+    # Closed: every edge is shared by two triangles (four where two cells meet along an edge).
     edges = Counter(
         tuple(sorted(e)) for f in faces.tolist() for e in ((f[0], f[1]), (f[1], f[2]), (f[2], f[0]))
     )
-    assert set(edges.values()) == {2}
+    assert set(edges.values()) <= {2, 4} and 2 in set(edges.values())
     # The vertices are the voxels' corners, in metres.
     assert np.allclose(vertices / 0.01, np.round(vertices / 0.01))
     lo, hi = cells.min(axis=0) * 0.01, (cells.max(axis=0) + 1) * 0.01
