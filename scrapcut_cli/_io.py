@@ -156,6 +156,8 @@ def atomic_path(
         prefix = f".{target.name}.{os.getpid()}."
         if directory:
             tmp = Path(tempfile.mkdtemp(prefix=prefix, suffix=".tmp", dir=parent))
+            # mkdtemp creates 0700 folders; outputs get the user's normal permissions (0755).
+            os.chmod(tmp, 0o777 & ~_umask())
         else:
             fd, name = tempfile.mkstemp(prefix=prefix, suffix=".tmp", dir=parent)
             os.close(fd)
@@ -186,9 +188,53 @@ def atomic_path(
     _sync_folder(parent)
     if not directory:
         # mkstemp creates 0600 files; outputs should get the user's normal permissions.
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(target, 0o666 & ~umask)
+        os.chmod(target, 0o666 & ~_umask())
+
+
+def _umask() -> int:
+    """The process's file mode creation mask (read without changing it for long)."""
+    umask = os.umask(0)
+    os.umask(umask)
+    return umask
+
+
+def prepare_output(
+    target: str | os.PathLike[str],
+    *,
+    force: bool = False,
+    parents: bool = False,
+    directory: bool = False,
+    option: str = "-o",
+) -> Path:
+    """Check a user-named output before any work, as good command-line tools do.
+
+    - an existing ``target`` is replaced only with ``force`` (the message says so); an empty
+      folder, as a folder output, is not in the way;
+    - a missing parent folder is an error unless ``parents``, which creates it (0755, like
+      ``mkdir -p``): a typo in a folder name must not silently grow a tree;
+    - then :func:`check_output_path` (no devices, FIFOs, link loops).
+
+    Returns where the output really is. Raises FileError naming ``option``.
+    """
+    path = Path(target)
+    parent = path.parent if str(path.parent) else Path(".")
+    if _stat(parent, "output folder") is None:
+        if not parents:
+            raise FileError(
+                f"{option} {path}: folder {parent} does not exist (create it, or add --parents)"
+            )
+        try:
+            parent.mkdir(parents=True, exist_ok=True)
+        except FileExistsError:
+            raise FileError(f"{option} {path}: {parent} is not a folder") from None
+    elif not parent.is_dir():
+        raise FileError(f"{option} {path}: {parent} is not a folder")
+    real = check_output_path(path, directory=directory)
+    empty_folder = directory and path.is_dir() and not any(path.iterdir())
+    if not force and not empty_folder and (path.exists() or path.is_symlink()):
+        kind = "folder" if path.is_dir() else "file"
+        raise FileError(f"{option} {path}: the {kind} exists; add --force to replace it")
+    return real
 
 
 def _sync(tmp: Path, target: Path, *, directory: bool) -> None:

@@ -61,7 +61,9 @@ def test_json_to_stdout(files: dict[str, Path]) -> None:
     result = run("eval", files["nurbs"], files["skeleton"], "--reference", files["ref"],
                  "--object", "cylinder", "--format", "json")  # fmt: skip
     assert result.exit_code == 0, result.output  # type: ignore[attr-defined]
-    rows = json.loads(result.stdout)  # type: ignore[attr-defined]
+    data = json.loads(result.stdout)  # type: ignore[attr-defined]
+    assert data["schema"] == "scrapcut.eval/v1" and data["tool_version"]
+    rows = data["rows"]
     assert [(r["object"], r["method"]) for r in rows] == [
         ("cylinder", "nurbs"),
         ("cylinder", "skeleton"),
@@ -76,7 +78,7 @@ def test_json_with_paper_marks_what_is_worse(files: dict[str, Path]) -> None:
     result = run("eval", files["nurbs"], files["skeleton"], "--reference", files["ref"],
                  "--object", "cylinder", "--format", "json", "--paper")  # fmt: skip
     assert result.exit_code == 0, result.output  # type: ignore[attr-defined]
-    nurbs, skel = json.loads(result.stdout)  # type: ignore[attr-defined]
+    nurbs, skel = json.loads(result.stdout)["rows"]  # type: ignore[attr-defined]
     assert nurbs["paper"]["mean_mm"] == 3.01
     assert nurbs["worse_than_paper"] == ["min_mm"]  # 2.00 vs 0.30
     assert skel["worse_than_paper"] == ["mean_mm", "min_mm"]  # 3.50 vs 3.10 and 0.45
@@ -95,15 +97,15 @@ def test_table_on_screen(files: dict[str, Path]) -> None:
 def test_output_file_format_from_suffix(files: dict[str, Path], suffix: str, fmt: str) -> None:
     target = files["dir"] / "out" / f"report{suffix}"
     result = run("eval", files["nurbs"], files["skeleton"], "--reference", files["ref"],
-                 "-o", target)  # fmt: skip
+                 "-o", target, "--parents")  # fmt: skip
     assert result.exit_code == 0, result.output  # type: ignore[attr-defined]
     text = target.read_text()
     if fmt == "markdown":
-        assert text.startswith("| Object | Method | Mean [mm]")
+        assert text.startswith("| File | Object | Method | Mean [mm]")
     elif fmt == "csv":
         assert len(list(csv.DictReader(io.StringIO(text)))) == 2
     else:
-        assert len(json.loads(text)) == 2
+        assert len(json.loads(text)["rows"]) == 2
     assert "cylinder" in result.stdout  # type: ignore[attr-defined]  # table still shown
     assert not list(target.parent.glob("*.tmp"))
 
@@ -138,7 +140,7 @@ def test_coverage_option(files: dict[str, Path]) -> None:
     result = run("eval", files["skeleton"], "--reference", files["ref"], "--coverage-mm", "3",
                  "--format", "json")  # fmt: skip
     assert result.exit_code == 0, result.output  # type: ignore[attr-defined]
-    (row,) = json.loads(result.stdout)  # type: ignore[attr-defined]
+    (row,) = json.loads(result.stdout)["rows"]  # type: ignore[attr-defined]
     assert row["coverage"] == 0.0 and row["coverage_threshold_mm"] == pytest.approx(3.0)
 
 
@@ -174,7 +176,7 @@ def test_default_reference_is_the_recording_in_the_path_file(tmp_path: Path) -> 
     )
     result = run("eval", path, "--format", "json", "--paper")
     assert result.exit_code == 0, result.output  # type: ignore[attr-defined]
-    (row,) = json.loads(result.stdout)  # type: ignore[attr-defined]
+    (row,) = json.loads(result.stdout)["rows"]  # type: ignore[attr-defined]
     assert (row["object"], row["method"]) == ("air_chamber", "nurbs")
     assert row["mean_mm"] == pytest.approx(3.0, abs=1e-6)
     assert row["paper"]["max_mm"] == 13.37

@@ -169,7 +169,7 @@ def test_output_writes_the_path_file_of_the_observed_frames(
     report = json.loads((tmp_path / "explored.error.json").read_text())
     again = _run("eval", out, "--format", "json")
     assert again.exit_code == 0, again.output
-    (row,) = json.loads(again.stdout)
+    (row,) = json.loads(again.stdout)["rows"]
     for key in ("mean_mm", "sd_mm", "min_mm", "max_mm", "coverage", "reverse_max_mm"):
         assert report[key] == pytest.approx(row[key], abs=1e-9), key
         assert summary["error"][key] == pytest.approx(row[key], abs=1e-9), key

@@ -129,7 +129,7 @@ def _check_mcap(path: Path, setpoints: int) -> None:
 def _eval_row(path_file: Path, *extra: object) -> dict[str, object]:
     result = _run("eval", path_file, "--format", "json", *extra)
     assert result.exit_code == 0, result.output
-    (row,) = json.loads(result.stdout)
+    (row,) = json.loads(result.stdout)["rows"]
     return dict(row)
 
 

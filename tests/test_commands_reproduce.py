@@ -110,7 +110,7 @@ def test_scrapcut_eval_gives_the_same_figures(small_run: tuple[Path, Result]) ->
     row = next(r for r in rows if (r["object"], r["method"]) == ("cylinder", "nurbs"))
     result = run("eval", out / "paths" / "cylinder_nurbs.json", "--format", "json")
     assert result.exit_code == 0, result.output
-    (again,) = json.loads(result.stdout)
+    (again,) = json.loads(result.stdout)["rows"]
     assert again["object"] == "cylinder"  # from the recording's metadata
     for key in ("mean_mm", "sd_mm", "min_mm", "max_mm", "coverage", "reverse_max_mm"):
         assert again[key] == pytest.approx(row[key], abs=1e-12)

@@ -104,7 +104,9 @@ def test_json_rows_have_the_fixed_keys_in_millimetres() -> None:
         offset_row("cylinder", "nurbs", 2.0),
         ReportRow("basket", "skeleton", None, failure="skeleton broken into 3 pieces"),
     ]
-    records = json.loads(render_json(rows, paper=load_paper_table()))
+    data = json.loads(render_json(rows, paper=load_paper_table()))
+    assert data["schema"] == "scrapcut.eval/v1" and data["tool_version"]
+    records = data["rows"]
     assert [(r["object"], r["method"]) for r in records] == [
         ("basket", "skeleton"),
         ("cylinder", "nurbs"),
@@ -190,7 +192,7 @@ def test_oracle_rows_are_labelled_in_every_rendering() -> None:
     row = replace(offset_row("cylinder", "skeleton", 2.0, leaf_size_m=0.005), oracle_views=True)
     assert row.label == "skeleton 5 mm (oracle views)"
     assert "| cylinder | skeleton 5 mm (oracle views) |" in render_markdown([row])
-    (record,) = json.loads(render_json([row]))
+    (record,) = json.loads(render_json([row]))["rows"]
     assert record["oracle_views"] is True and record["label"] == row.label
     (line,) = csv.DictReader(io.StringIO(render_csv([row])))
     assert line["oracle_views"] == "True"

@@ -227,7 +227,7 @@ def cluster(
 def _eval_json(path: Path) -> dict[str, float]:
     result = CliRunner().invoke(cli, ["eval", str(path), "--format", "json"])
     assert result.exit_code == 0, result.output
-    (row,) = json.loads(result.stdout)
+    (row,) = json.loads(result.stdout)["rows"]
     return dict(row)
 
 

@@ -505,3 +505,21 @@ def apply_calibration_options(
         file=None if calibration_path is None else str(calibration_path),
         self_calibrate=True if self_calibrate else None,
     )
+
+
+# --------------------------------------------------------------------------- outputs
+
+
+def output_options(f: F) -> F:
+    """``--force`` (replace existing outputs) and ``--parents`` (create a missing folder)."""
+    f = click.option(
+        "--parents",
+        is_flag=True,
+        help="Create the output's missing parent folders (default: a missing folder is an error).",
+    )(f)
+    f = click.option(
+        "--force",
+        is_flag=True,
+        help="Replace outputs that exist (default: an existing output is an error).",
+    )(f)
+    return f

@@ -8,10 +8,17 @@ from typing import TYPE_CHECKING
 import click
 
 from scrapcut_cli.commands._console import err, print_table
-from scrapcut_cli.commands._options import build_config, config_option, config_type
+from scrapcut_cli.commands._options import (
+    build_config,
+    config_option,
+    config_type,
+    output_options,
+)
 
 if TYPE_CHECKING:
     from rich.table import Table
+
+    from scrapcut_cli.evaluation.report import ReportRow
 
 FORMATS = ("table", "markdown", "csv", "json")
 _SUFFIX_FORMATS = {".md": "markdown", ".markdown": "markdown", ".csv": "csv", ".json": "json"}
@@ -42,6 +49,12 @@ _SUFFIX_FORMATS = {".md": "markdown", ".markdown": "markdown", ".csv": "csv", ".
     help="Output format (default: table on screen; with -o, from the file's suffix).",
 )
 @click.option(
+    "--json",
+    "as_json",
+    is_flag=True,
+    help="Print one JSON object (scrapcut.eval/v1: schema, tool_version, rows); as --format json.",
+)
+@click.option(
     "-o",
     "--output",
     type=click.Path(dir_okay=False, path_type=Path),
@@ -54,7 +67,23 @@ _SUFFIX_FORMATS = {".md": "markdown", ".markdown": "markdown", ".csv": "csv", ".
     "plot_dir",
     type=click.Path(file_okay=False, path_type=Path),
     default=None,
-    help="Write PNG figures into DIR (error along the curve, paths, leaf-size sweep).",
+    help="Write PNG figures into DIR (error along the curve, paths, leaf-size sweep); an "
+    "existing folder with files needs --force (its other files are kept).",
+)
+@click.option(
+    "--save-results",
+    "results_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    metavar="DIR",
+    help="Write every per-sample error into DIR: LABEL.errors.npy (metres), LABEL.errors.csv "
+    "(where each sample is), LABEL.setpoints.csv and results.json (as evo's --save_results).",
+)
+@click.option(
+    "--align",
+    is_flag=True,
+    help="Also lay each curve rigidly onto the reference (ICP with Umeyama steps, no scale): "
+    "the motion is the calibration error, the distances left the shape error.",
 )
 @click.option(
     "--coverage-mm",
@@ -63,22 +92,33 @@ _SUFFIX_FORMATS = {".md": "markdown", ".markdown": "markdown", ".csv": "csv", ".
     help="Coverage threshold [mm] (default 10).",
 )
 @config_option
+@output_options
 def eval_cmd(
     paths: tuple[Path, ...],
     reference: Path | None,
     object_name: str | None,
     fmt: str | None,
+    as_json: bool,
     output: Path | None,
     paper: bool,
     plot_dir: Path | None,
+    results_dir: Path | None,
+    align: bool,
     coverage_mm: float | None,
     config_path: Path | None,
+    force: bool,
+    parents: bool,
 ) -> None:
     """Path error of PATH.json files against the painted reference (the paper's Table I).
 
     Samples the reference every 1 mm and measures the distance to the nearest point of each
-    fitted curve: mean, SD, min, max in mm, plus coverage (share of samples within 10 mm),
-    the reverse distance (curve to reference) and the length ratio.
+    fitted curve: mean, SD, min, max, RMSE, median and P95 in mm, plus coverage (share of
+    samples within 10 mm), the reverse distance (curve to reference) and the length ratio. The
+    set-points are scored too (their surface points against the reference).
+
+    Refused: a path and a reference in different frames, or one about 1000× the size of the
+    other (millimetres read as metres). Warned: coverage near 0, a length ratio far from 1, no
+    set-points, flagged set-points, set-points missing along the line.
     """
     from dataclasses import replace
 
@@ -90,9 +130,14 @@ def eval_cmd(
         render_json,
         render_markdown,
         rich_table,
+        sort_rows,
     )
     from scrapcut_cli.evaluation.sources import evaluate_path_files
 
+    if as_json:
+        if fmt not in (None, "json"):
+            raise click.UsageError(f"--json and --format {fmt} contradict each other")
+        fmt = "json"
     if output is not None and fmt is None:
         fmt = _SUFFIX_FORMATS.get(output.suffix.lower())
         if fmt is None:
@@ -101,22 +146,32 @@ def eval_cmd(
                 param_hint="-o",
             )
     fmt = fmt or "table"
-    if output is not None:
-        from scrapcut_cli._io import check_output_path
+    from scrapcut_cli._io import prepare_output
 
-        check_output_path(output)
+    for target, option, directory in (
+        (output, "-o", False),
+        (plot_dir, "--plot", True),
+        (results_dir, "--save-results", True),
+    ):
+        if target is None:
+            continue
+        prepare_output(target, force=force, parents=parents, directory=directory, option=option)
     config = build_config(config_path)
     config = config.override(
         "evaluation",
         coverage_threshold_m=None if coverage_mm is None else coverage_mm / 1000.0,
     )
     rows = evaluate_path_files(
-        paths, reference=reference, config=config.evaluation, recording_config=config.recording
+        paths,
+        reference=reference,
+        config=config.evaluation,
+        recording_config=config.recording,
+        align=align,
     )
     if object_name:
         rows = [replace(r, object=object_name) for r in rows]
     table1 = load_paper_table() if paper else None
-    table = rich_table(rows, paper=table1, title="Path error (Table I)")
+    table = rich_table(rows, paper=table1, title="Path error (Table I)", detail=True)
 
     if fmt == "table" and output is None:
         print_table(table)
@@ -124,7 +179,7 @@ def eval_cmd(
         if fmt == "table":
             text = _plain_table(table)
         elif fmt == "markdown":
-            text = render_markdown(rows, paper=table1)
+            text = render_markdown(rows, paper=table1, detail=True)
         elif fmt == "csv":
             text = render_csv(rows, paper=table1)
         else:
@@ -135,9 +190,55 @@ def eval_cmd(
             write_text_atomic(output, text)
             print_table(table)
             err.print(f"wrote {output}")
+    if align and fmt == "table":
+        print_table(alignment_table(rows))
+    for row in sort_rows(rows):
+        for warning in row.warnings:
+            err.print(f"[yellow]warning:[/] {row.name}: {warning}", soft_wrap=True)
     if plot_dir is not None:
         written = write_plots(rows, plot_dir)
         err.print(f"wrote {len(written)} figure(s) to {plot_dir}/")
+    if results_dir is not None:
+        from scrapcut_cli.evaluation.results import write_results
+
+        write_results(rows, results_dir)
+        err.print(f"wrote per-sample errors of {len(rows)} path file(s) to {results_dir}/")
+
+
+def alignment_table(rows: list[ReportRow]) -> Table:
+    """Shape error after the rigid alignment, and the alignment (the calibration error)."""
+    from rich.table import Table
+
+    from scrapcut_cli.evaluation.report import sort_rows
+
+    table = Table(
+        title="After rigid alignment (--align): shape error vs calibration error",
+        caption="Shape error: distances left once the curve is laid rigidly onto the reference. "
+        "Calibration error: the rigid motion that did it (translation of the curve's middle, "
+        "rotation angle).",
+    )
+    for name in ("File", "Mean [mm]", "RMSE [mm]", "Max [mm]", "Coverage"):
+        table.add_column(name, justify="left" if name == "File" else "right")
+    table.add_column("Translation [mm]", justify="right")
+    table.add_column("Rotation [deg]", justify="right")
+    for row in sort_rows(rows):
+        figures = row.aligned_mm()
+        if figures is None:
+            table.add_row(row.name, *(["—"] * 6))
+            continue
+        rotation = f"{figures['align_rotation_deg']:.2f}"
+        if figures["align_straight_reference"]:
+            rotation += " (roll about the line unobservable)"
+        table.add_row(
+            row.name,
+            f"{figures['aligned_mean_mm']:.2f}",
+            f"{figures['aligned_rmse_mm']:.2f}",
+            f"{figures['aligned_max_mm']:.2f}",
+            f"{100.0 * figures['aligned_coverage']:.1f}%",
+            f"{figures['align_translation_mm']:.2f}",
+            rotation,
+        )
+    return table
 
 
 def _plain_table(table: Table) -> str:

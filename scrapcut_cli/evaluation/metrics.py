@@ -15,7 +15,12 @@ far from the path, but only a few). So every result also carries:
   path;
 - the reverse distance, path → reference (mean and max over the curve resampled at the same
   spacing);
-- the length ratio, curve length / reference length.
+- the length ratio, curve length / reference length;
+- RMSE, median and 95th percentile of the same per-sample distances (evo's habit).
+
+The set-points are scored too (:func:`setpoint_error`): the surface point of each set-point
+(where the jet meets the piece) against the reference, and how much of the reference they
+cover, so a path file with a good curve but missing or wandering set-points cannot hide.
 """
 
 from __future__ import annotations
@@ -65,6 +70,10 @@ class PathError:
         Distance of each reference sample to the curve (the paper's Fig. 5 along ``sample_s``).
     coverage_threshold_m, sample_spacing_m : float
         The configuration the numbers were computed with.
+    rmse_m, median_m, p95_m : float
+        Root mean square, median and 95th percentile of the same distances.
+    sample_points : (M, 3) float64, metres, base frame
+        The reference samples themselves (``--save-results`` writes them beside the errors).
     """
 
     mean_m: float
@@ -81,6 +90,10 @@ class PathError:
     sample_errors_m: FloatArray
     coverage_threshold_m: float
     sample_spacing_m: float
+    rmse_m: float = float("nan")
+    median_m: float = float("nan")
+    p95_m: float = float("nan")
+    sample_points: FloatArray | None = None
 
     @property
     def samples(self) -> int:
@@ -94,6 +107,9 @@ class PathError:
             "sd_mm": self.sd_m * MM,
             "min_mm": self.min_m * MM,
             "max_mm": self.max_m * MM,
+            "rmse_mm": self.rmse_m * MM,
+            "median_mm": self.median_m * MM,
+            "p95_mm": self.p95_m * MM,
             "coverage": self.coverage,
             "reverse_mean_mm": self.reverse_mean_m * MM,
             "reverse_max_mm": self.reverse_max_m * MM,
@@ -161,6 +177,96 @@ def path_error(
         sample_errors_m=errors,
         coverage_threshold_m=float(config.coverage_threshold_m),
         sample_spacing_m=float(config.sample_spacing_m),
+        rmse_m=float(np.sqrt(np.mean(errors * errors))),
+        median_m=float(np.median(errors)),
+        p95_m=float(np.percentile(errors, 95.0)),
+        sample_points=ref_samples,
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class SetpointError:
+    """The set-points of a path against the reference. Lengths in metres, base frame.
+
+    Attributes
+    ----------
+    count : int
+        Set-points in the path (0: the path cannot be cut, whatever its curve scores).
+    flagged : dict[str, int]
+        Set-points per flag (``tilted``, ``collision``, ``no_surface``...); a set-point with
+        two flags counts in both.
+    flagged_total : int
+        Set-points with at least one flag.
+    mean_m, max_m : float or None
+        Distance of each set-point's surface point (where the torch axis meets the piece) to
+        the reference polyline; None without set-points.
+    coverage : float
+        Share of the reference samples within the coverage threshold of the polyline through
+        the surface points (0 without set-points): set-points missing along part of the line
+        lower it even when the curve is complete.
+    """
+
+    count: int
+    flagged: dict[str, int]
+    flagged_total: int
+    mean_m: float | None
+    max_m: float | None
+    coverage: float
+
+    def summary_mm(self) -> dict[str, Any]:
+        """Figures for reports (millimetres, plain numbers)."""
+        return {
+            "setpoints": self.count,
+            "setpoints_flagged": self.flagged_total,
+            "setpoint_flags": dict(sorted(self.flagged.items())),
+            "setpoint_mean_mm": None if self.mean_m is None else self.mean_m * MM,
+            "setpoint_max_mm": None if self.max_m is None else self.max_m * MM,
+            "setpoint_coverage": self.coverage,
+        }
+
+
+def setpoint_error(
+    surface_points: ArrayLike,
+    flags: list[list[str]],
+    reference: ArrayLike,
+    *,
+    config: EvaluationConfig | None = None,
+) -> SetpointError:
+    """Score a path's set-points against the painted reference.
+
+    Parameters
+    ----------
+    surface_points : (N, 3) float64, metres, base frame
+        Each set-point's surface point, in path order (N may be 0).
+    flags : list of N lists of str
+        Each set-point's flags.
+    reference : (M, 3) float64, metres, base frame
+        The painted reference polyline.
+    """
+    config = EvaluationConfig() if config is None else config
+    pts = np.asarray(surface_points, dtype=np.float64).reshape(-1, 3)
+    if len(flags) != len(pts):
+        raise EvaluationError(f"{len(pts)} set-points but {len(flags)} flag lists")
+    ref = _polyline(reference, "reference")
+    counts: dict[str, int] = {}
+    for names in flags:
+        for name in set(names):
+            counts[name] = counts.get(name, 0) + 1
+    flagged_total = sum(1 for names in flags if names)
+    if len(pts) == 0:
+        return SetpointError(0, counts, flagged_total, None, None, 0.0)
+    if not np.isfinite(pts).all():
+        raise EvaluationError("set-point surface points hold NaN or infinite coordinates")
+    d = PolylineDistance(ref).distance(pts)
+    samples = resample_polyline(ref, config.sample_spacing_m)
+    covered = PolylineDistance(pts).distance(samples) <= config.coverage_threshold_m
+    return SetpointError(
+        count=len(pts),
+        flagged=counts,
+        flagged_total=flagged_total,
+        mean_m=float(d.mean()),
+        max_m=float(d.max()),
+        coverage=float(np.mean(covered)),
     )
 
 

@@ -9,6 +9,9 @@
   per-parameter figures of ``scrapcut batch``);
 - :func:`write_plots` — all that apply to a set of report rows, one file per object.
 
+Each method has its colour in every figure; when several path files of one method are plotted
+together (four fits of one object), each file gets its own colour and its name in the legend.
+
 Axes are millimetres; positions are in the base frame.
 """
 
@@ -28,21 +31,26 @@ from scrapcut_cli.evaluation.report import ReportRow, sort_rows
 #: One colour per method, the same in every figure (matplotlib's tab10 entries).
 METHOD_COLOURS = {"nurbs": "tab:blue", "skeleton": "tab:orange"}
 _FALLBACK = ("tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive")
+#: One colour per file when several files share a method (tab10 without its grey).
+_DISTINCT = (
+    "tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple",
+    "tab:brown", "tab:pink", "tab:olive", "tab:cyan",
+)  # fmt: skip
 
 
 def plot_error_along(rows: Sequence[ReportRow], out_path: str | Path, *, title: str) -> Path:
     """Error (mm) against normalised position along the reference, one line per row."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(8.0, 4.5), layout="constrained")
-    for i, row in enumerate(r for r in sort_rows(rows) if r.error is not None):
+    for row in (r for r in sort_rows(rows) if r.error is not None):
         assert row.error is not None
         ax.plot(
             row.error.sample_s,
             row.error.sample_errors_m * 1000.0,
-            color=_colour(row, i),
+            color=_colour(row, rows),
             linestyle=_dash(row, rows),
             linewidth=1.4,
-            label=f"{row.label} (mean {row.error.mean_m * 1000.0:.2f} mm, "
+            label=f"{_legend(row, rows)} (mean {row.error.mean_m * 1000.0:.2f} mm, "
             f"max {row.error.max_m * 1000.0:.2f} mm)",
         )
     threshold = _first_threshold_mm(rows)
@@ -88,16 +96,16 @@ def plot_paths(
     names = "xyz"
     for ax, ((a, b), view) in zip(axes, views, strict=True):
         ax.plot(ref[:, a], ref[:, b], color="black", linewidth=3.0, alpha=0.35, label="reference")
-        for i, row in enumerate(r for r in sort_rows(rows) if r.curve_points is not None):
+        for row in (r for r in sort_rows(rows) if r.curve_points is not None):
             assert row.curve_points is not None
             curve = np.asarray(row.curve_points) * 1000.0
             ax.plot(
                 curve[:, a],
                 curve[:, b],
-                color=_colour(row, i),
+                color=_colour(row, rows),
                 linestyle=_dash(row, rows),
                 linewidth=1.3,
-                label=row.label,
+                label=_legend(row, rows),
             )
         ax.plot(ref[0, a], ref[0, b], "o", color="black", markersize=5, label="reference start")
         ax.set_aspect("equal", adjustable="datalim")
@@ -146,11 +154,11 @@ def plot_leaf_sweep(rows: Sequence[ReportRow], out_path: str | Path, *, title: s
             clip_on=False,
             label="skeleton failed (broke into pieces)",
         )
-    for i, row in enumerate(r for r in sort_rows(rows) if r.leaf_size_m is None):
+    for row in (r for r in sort_rows(rows) if r.leaf_size_m is None):
         if row.error is not None:
             ax.axhline(
                 row.error.mean_m * 1000.0,
-                color=_colour(row, i),
+                color=_colour(row, rows),
                 linestyle="--",
                 label=f"{row.method} mean ({row.error.mean_m * 1000.0:.2f} mm)",
             )
@@ -263,12 +271,43 @@ def _save(fig: Any, out_path: str | Path) -> Path:
     return out_path
 
 
-def _colour(row: ReportRow, index: int) -> str:
-    return METHOD_COLOURS.get(row.method, _FALLBACK[index % len(_FALLBACK)])
+def _several_files(rows: Sequence[ReportRow]) -> bool:
+    """True when two rows share a method and leaf size but come from different files (four
+    path files of one object and method): each then gets its own colour and its file name."""
+    seen: dict[tuple[str, float], str] = {}
+    for r in rows:
+        key = (r.method, r.leaf_size_m or 0.0)
+        if key in seen and seen[key] != _file(r):
+            return True
+        seen.setdefault(key, _file(r))
+    return False
+
+
+def _file(row: ReportRow) -> str:
+    return row.name or Path(row.source).name
+
+
+def _colour(row: ReportRow, rows: Sequence[ReportRow]) -> str:
+    """The method's colour; one colour per row when several files share a method."""
+    if _several_files(rows):
+        ordered = sort_rows(rows)
+        index = next(i for i, r in enumerate(ordered) if r is row)
+        return _DISTINCT[index % len(_DISTINCT)]
+    others = sorted({r.method for r in rows if r.method not in METHOD_COLOURS})
+    if row.method in METHOD_COLOURS:
+        return METHOD_COLOURS[row.method]
+    return _FALLBACK[others.index(row.method) % len(_FALLBACK)]
+
+
+def _legend(row: ReportRow, rows: Sequence[ReportRow]) -> str:
+    """The row's label, with its file's name when several files share a method."""
+    return f"{_file(row)}: {row.label}" if _several_files(rows) else row.label
 
 
 def _dash(row: ReportRow, rows: Sequence[ReportRow]) -> Any:
     """Distinguish rows of the same method (a leaf-size sweep) by dash pattern."""
+    if _several_files(rows):
+        return "-"
     same = sorted(
         {r.leaf_size_m or 0.0 for r in rows if r.method == row.method},
     )

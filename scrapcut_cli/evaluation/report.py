@@ -30,10 +30,12 @@ from numpy.typing import NDArray
 
 from scrapcut_cli._io import read_text_input
 from scrapcut_cli.errors import EvaluationError, FileError
-from scrapcut_cli.evaluation.metrics import PathError
+from scrapcut_cli.evaluation.metrics import PathError, SetpointError
 
 if TYPE_CHECKING:
     from rich.table import Table
+
+    from scrapcut_cli.evaluation.align import Alignment
 
 #: The Table I columns, in the paper's order.
 TABLE1_FIELDS = ("mean_mm", "sd_mm", "min_mm", "max_mm")
@@ -110,7 +112,12 @@ class ReportRow:
     ``failure`` is the one-line reason when the path could not be made; ``curve_points`` and
     ``reference_points`` ((N, 3) metres, base frame) are kept for the plots, not rendered;
     ``oracle_views`` marks a scan whose views followed the true line (a simulator sweep);
-    ``extras`` holds further per-row figures (name → number or text), rendered in JSON and CSV.
+    ``extras`` holds further per-row figures (name → number or text), rendered in JSON and CSV;
+    ``name`` labels the row by its path file's name; ``setpoints`` scores its set-points;
+    ``warnings`` name what makes the figures suspect; ``alignment`` and ``aligned_error`` are
+    the rigid alignment and the shape error after it (``eval --align``); ``frame_id`` the frame
+    of every coordinate; ``setpoint_surface_points`` ((K, 3) metres) and ``setpoint_flags`` the
+    set-points scored (kept for ``--save-results``, not rendered).
     """
 
     object: str
@@ -124,6 +131,14 @@ class ReportRow:
     reference_points: NDArray[np.float64] | None = None
     oracle_views: bool = False
     extras: dict[str, Any] = field(default_factory=dict)
+    name: str = ""
+    setpoints: SetpointError | None = None
+    warnings: tuple[str, ...] = ()
+    alignment: Alignment | None = None
+    aligned_error: PathError | None = None
+    frame_id: str = ""
+    setpoint_surface_points: NDArray[np.float64] | None = None
+    setpoint_flags: tuple[tuple[str, ...], ...] = ()
 
     @property
     def leaf_size_m(self) -> float | None:
@@ -141,6 +156,22 @@ class ReportRow:
     def figures_mm(self) -> dict[str, Any] | None:
         """The metric in millimetres (``PathError.summary_mm``), or None for a failed row."""
         return None if self.error is None else self.error.summary_mm()
+
+    def aligned_mm(self) -> dict[str, Any] | None:
+        """Shape error after the rigid alignment and the alignment itself (mm, deg), or None."""
+        if self.alignment is None or self.aligned_error is None:
+            return None
+        aligned = self.aligned_error.summary_mm()
+        return {
+            "aligned_mean_mm": aligned["mean_mm"],
+            "aligned_rmse_mm": aligned["rmse_mm"],
+            "aligned_max_mm": aligned["max_mm"],
+            "aligned_coverage": aligned["coverage"],
+            "align_translation_mm": self.alignment.translation_m * 1000.0,
+            "align_rotation_deg": self.alignment.rotation_deg,
+            "align_straight_reference": self.alignment.straight,
+            "T_reference_curve": self.alignment.T_ref_curve.tolist(),
+        }
 
 
 def leaf_size_from_params(params: dict[str, Any]) -> float | None:
@@ -185,6 +216,14 @@ def rows_to_records(
         record["params"] = row.params
         record["label"] = row.label
         record["oracle_views"] = row.oracle_views
+        record["file"] = row.name or (Path(row.source).name if row.source else "")
+        record["frame_id"] = row.frame_id
+        if row.setpoints is not None:
+            record.update(row.setpoints.summary_mm())
+        record["warnings"] = list(row.warnings)
+        aligned = row.aligned_mm()
+        if aligned is not None:
+            record.update(aligned)
         record.update(row.extras)
         if paper is not None:
             figures_paper = paper.get((row.object, row.method))
@@ -196,16 +235,33 @@ def rows_to_records(
     return records
 
 
+#: Schema of ``scrapcut eval --json`` (and ``--save-results DIR/results.json``).
+EVAL_SCHEMA = "scrapcut.eval/v1"
+
+
 def render_json(rows: Sequence[ReportRow], *, paper: PaperTable | None = None) -> str:
-    """A JSON list of rows (``scrapcut eval --format json``)."""
-    return json.dumps(rows_to_records(rows, paper=paper), indent=2, allow_nan=False) + "\n"
+    """``scrapcut eval --json``: one object, ``schema``, ``tool_version`` and ``rows`` (one
+    dictionary per path file, the keys of DESIGN.md's error report first)."""
+    from scrapcut_cli import __version__
+
+    data = {
+        "schema": EVAL_SCHEMA,
+        "tool_version": __version__,
+        "units": "mm",
+        "rows": rows_to_records(rows, paper=paper),
+    }
+    return json.dumps(data, indent=2, allow_nan=False) + "\n"
 
 
 CSV_FIELDS = (
+    "file",
     "object",
     "method",
     "leaf_size_mm",
     *TABLE1_FIELDS,
+    "rmse_mm",
+    "median_mm",
+    "p95_mm",
     "coverage",
     "reverse_mean_mm",
     "reverse_max_mm",
@@ -213,9 +269,16 @@ CSV_FIELDS = (
     "reference_length_mm",
     "curve_length_mm",
     "samples",
+    "setpoints",
+    "setpoints_flagged",
+    "setpoint_mean_mm",
+    "setpoint_max_mm",
+    "setpoint_coverage",
     "note",
+    "warnings",
     "failure",
     "path",
+    "frame_id",
     "oracle_views",
 )
 
@@ -254,6 +317,31 @@ COLUMNS = (
     "Length ratio",
     "Note",
 )
+#: ``scrapcut eval``'s tables (``detail=True``) add the file, the spread of the same distances
+#: and the set-points' score; the note then carries the row's warnings (⚠).
+DETAIL_FIGURES = ("RMSE [mm]", "Median [mm]", "P95 [mm]")
+DETAIL_SETPOINTS = ("Set-points", "Set-pt mean [mm]", "Set-pt cover")
+WARNING_MARK = "⚠"
+
+
+def table_columns(*, detail: bool = False) -> tuple[str, ...]:
+    """The column titles of the human-readable tables."""
+    if not detail:
+        return COLUMNS
+    figures_end = 2 + len(TABLE1_FIELDS)
+    return (
+        "File",
+        *COLUMNS[:figures_end],
+        *DETAIL_FIGURES,
+        *COLUMNS[figures_end:-1],
+        *DETAIL_SETPOINTS,
+        COLUMNS[-1],
+    )
+
+
+def _first_figure(detail: bool) -> int:
+    """Index of the Mean column."""
+    return 3 if detail else 2
 
 
 @dataclass(frozen=True)
@@ -266,15 +354,22 @@ class TableLine:
     paper_note: str = ""
 
 
-def table_lines(rows: Sequence[ReportRow], *, paper: PaperTable | None = None) -> list[TableLine]:
-    """The rows formatted for :data:`COLUMNS`, shared by the markdown and rich renderers."""
+def table_lines(
+    rows: Sequence[ReportRow], *, paper: PaperTable | None = None, detail: bool = False
+) -> list[TableLine]:
+    """The rows formatted for :func:`table_columns`, shared by the markdown and rich
+    renderers."""
     lines = []
     for row in sort_rows(rows):
         figures = row.figures_mm()
         figures_paper = None if paper is None else paper.get((row.object, row.method))
         worse = set() if figures_paper is None else set(worse_than_paper(row, figures_paper))
-        cells = [row.object, row.label]
+        cells = [row.name or Path(row.source).name] if detail else []
+        cells += [row.object, row.label]
         cells += ["—" if figures is None else f"{figures[f]:.2f}" for f in TABLE1_FIELDS]
+        if detail:
+            keys = ("rmse_mm", "median_mm", "p95_mm")
+            cells += ["—" if figures is None else f"{figures[k]:.2f}" for k in keys]
         if figures is None:
             cells += ["—"] * 4
         else:
@@ -284,9 +379,16 @@ def table_lines(rows: Sequence[ReportRow], *, paper: PaperTable | None = None) -
                 f"{figures['reverse_max_mm']:.2f}",
                 f"{figures['length_ratio']:.3f}",
             ]
+        if detail:
+            cells += _setpoint_cells(row.setpoints)
         notes = [n for n in (row.note, row.failure and f"failed: {row.failure}") if n]
+        if detail:
+            notes += [f"{WARNING_MARK} {w}" for w in row.warnings]
         cells.append("; ".join(notes))
-        flags = [False, False, *(f in worse for f in TABLE1_FIELDS)] + [False] * 5
+        first = _first_figure(detail)
+        flags = [False] * len(cells)
+        for k, f in enumerate(TABLE1_FIELDS):
+            flags[first + k] = f in worse
         lines.append(
             TableLine(
                 cells=cells,
@@ -298,6 +400,17 @@ def table_lines(rows: Sequence[ReportRow], *, paper: PaperTable | None = None) -
             )
         )
     return lines
+
+
+def _setpoint_cells(setpoints: SetpointError | None) -> list[str]:
+    """Set-points (flagged), their mean distance and their coverage, for the detail table."""
+    if setpoints is None:
+        return ["—"] * len(DETAIL_SETPOINTS)
+    count = str(setpoints.count)
+    if setpoints.flagged_total:
+        count += f" ({setpoints.flagged_total} flagged)"
+    mean = "—" if setpoints.mean_m is None else f"{setpoints.mean_m * 1000.0:.2f}"
+    return [count, mean, f"{100.0 * setpoints.coverage:.1f}%"]
 
 
 def paper_summary(rows: Sequence[ReportRow], paper: PaperTable) -> str:
@@ -319,30 +432,37 @@ def paper_summary(rows: Sequence[ReportRow], paper: PaperTable) -> str:
 
 
 def render_markdown(
-    rows: Sequence[ReportRow], *, paper: PaperTable | None = None, title: str | None = None
+    rows: Sequence[ReportRow],
+    *,
+    paper: PaperTable | None = None,
+    title: str | None = None,
+    detail: bool = False,
 ) -> str:
     """A GitHub-flavoured markdown table; with ``paper``, the paper's figure follows each of
-    ours and figures worse than the paper carry ``▲``."""
-    figure_columns = range(2, 2 + len(TABLE1_FIELDS))
+    ours and figures worse than the paper carry ``▲``; ``detail``: ``scrapcut eval``'s columns
+    (file, RMSE, median, P95, set-points, warnings)."""
+    columns = table_columns(detail=detail)
+    first = _first_figure(detail)
+    figure_columns = range(first, first + len(TABLE1_FIELDS))
     header: list[str] = []
-    for i, name in enumerate(COLUMNS):
+    for i, name in enumerate(columns):
         header.append(name)
         if paper is not None and i in figure_columns:
-            header.append(f"{_TITLES[TABLE1_FIELDS[i - 2]]} paper")
+            header.append(f"{_TITLES[TABLE1_FIELDS[i - first]]} paper")
     text = []
     if title:
         text += [f"### {title}", ""]
     text.append("| " + " | ".join(header) + " |")
-    align = ["---", "---"] + ["---:"] * (len(header) - 3) + ["---"]
+    align = ["---"] * first + ["---:"] * (len(header) - first - 1) + ["---"]
     text.append("|" + "|".join(align) + "|")
-    for line in table_lines(rows, paper=paper):
+    for line in table_lines(rows, paper=paper, detail=detail):
         cells: list[str] = []
         for i, (cell, worse) in enumerate(zip(line.cells, line.worse, strict=True)):
-            if i == len(COLUMNS) - 1 and line.paper_note:
+            if i == len(columns) - 1 and line.paper_note:
                 cell = "; ".join(c for c in (cell, f"paper: {line.paper_note}") if c)
             cells.append(f"{cell} {WORSE_MARK}" if worse else cell)
             if paper is not None and i in figure_columns:
-                cells.append("—" if line.paper is None else line.paper[i - 2])
+                cells.append("—" if line.paper is None else line.paper[i - first])
         text.append("| " + " | ".join(_md_escape(c) for c in cells) + " |")
     text.append("")
     text.append(
@@ -350,6 +470,12 @@ def render_markdown(
         f"{_spacing_mm(rows)} mm) to the fitted curve; coverage = share of samples within "
         f"{_threshold_mm(rows)} mm; reverse = from the curve back to the reference."
     )
+    if detail:
+        text.append(
+            "Set-points: their surface points against the reference (mean) and the share of "
+            f"reference samples they cover; {WARNING_MARK} = a figure to check before trusting "
+            "the row."
+        )
     if paper is not None:
         text.append(
             f"{WORSE_MARK} = larger (worse) than the paper's figure. " + paper_summary(rows, paper)
@@ -358,20 +484,26 @@ def render_markdown(
 
 
 def rich_table(
-    rows: Sequence[ReportRow], *, paper: PaperTable | None = None, title: str | None = None
+    rows: Sequence[ReportRow],
+    *,
+    paper: PaperTable | None = None,
+    title: str | None = None,
+    detail: bool = False,
 ) -> Table:
     """A :class:`rich.table.Table`: our row, then the paper's figures in a dim row beneath it;
-    figures worse than the paper in red with ``▲``."""
+    figures worse than the paper in red with ``▲``; ``detail`` as :func:`render_markdown`."""
     from rich.table import Table
 
+    columns = table_columns(detail=detail)
+    first = _first_figure(detail)
     table = Table(title=title, caption=paper_summary(rows, paper) if paper is not None else None)
-    for i, name in enumerate(COLUMNS):
-        if i < len(COLUMNS) - 1:
+    for i, name in enumerate(columns):
+        if i < len(columns) - 1:
             header = _rich_escape(name.replace(" [", "\n["))
-            table.add_column(header, justify="right" if i >= 2 else "left", no_wrap=True)
+            table.add_column(header, justify="right" if i >= first else "left", no_wrap=True)
         else:
-            table.add_column(name, max_width=40, overflow="fold")
-    for line in table_lines(rows, paper=paper):
+            table.add_column(name, max_width=60 if detail else 40, overflow="fold")
+    for line in table_lines(rows, paper=paper, detail=detail):
         table.add_row(
             *(
                 f"[red]{_rich_escape(c)} {WORSE_MARK}[/red]" if m else _rich_escape(c)
@@ -379,17 +511,11 @@ def rich_table(
             )
         )
         if line.paper is not None:
-            table.add_row(
-                "",
-                "paper",
-                *line.paper,
-                "",
-                "",
-                "",
-                "",
-                _rich_escape(line.paper_note),
-                style="dim",
-            )
+            cells = [""] * len(columns)
+            cells[first - 1] = "paper"
+            cells[first : first + len(TABLE1_FIELDS)] = line.paper
+            cells[-1] = _rich_escape(line.paper_note)
+            table.add_row(*cells, style="dim")
     return table
 
 
@@ -413,6 +539,8 @@ def _csv_value(value: Any) -> Any:
         return ""
     if isinstance(value, dict):
         return json.dumps(value, sort_keys=True)
+    if isinstance(value, list):
+        return "; ".join(str(v) for v in value)
     return value
 
 

@@ -19,10 +19,12 @@ from numpy.typing import NDArray
 from scrapcut_cli._io import check_input_file, real_path
 from scrapcut_cli.config import EvaluationConfig, RecordingConfig, ScanMode
 from scrapcut_cli.errors import EvaluationError, FileError, ScrapcutError, ToolpathError
-from scrapcut_cli.evaluation.metrics import path_error
+from scrapcut_cli.evaluation.checks import check_scale, row_warnings
+from scrapcut_cli.evaluation.metrics import path_error, setpoint_error
 from scrapcut_cli.evaluation.report import ReportRow
 from scrapcut_cli.fitting.curve import Curve
 from scrapcut_cli.geometry import MAX_COORDINATE_M
+from scrapcut_cli.toolpath.path import CuttingPath
 
 
 @dataclass(frozen=True, eq=False)
@@ -31,6 +33,9 @@ class PathFile:
 
     ``curve_points`` : (N, 3) float64, metres, base frame — the fitted curve on the surface.
     ``source`` is the recording named in the file (as written, may be relative), or None.
+    ``setpoint_surface_points`` : (K, 3) float64, metres — where each set-point's torch axis
+    meets the piece (K may be 0); ``setpoint_flags`` their flags; ``setpoint_positions`` and
+    ``setpoint_orientations_xyzw`` (K, 3), (K, 4) the torch tip poses (for the review file).
     """
 
     path: Path
@@ -39,6 +44,18 @@ class PathFile:
     params: dict[str, Any]
     frame_id: str
     source: str | None
+    setpoint_surface_points: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
+    setpoint_flags: list[list[str]] = field(default_factory=list)
+    setpoint_positions: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
+    setpoint_orientations_xyzw: NDArray[np.float64] = field(
+        default_factory=lambda: np.zeros((0, 4))
+    )
+    source_start_ns: int | None = None
+
+    @property
+    def name(self) -> str:
+        """The file's name, the label of its row."""
+        return self.path.name
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,10 +88,10 @@ def load_path_file(path: str | Path) -> PathFile:
 
     path = Path(path)
     try:
-        curve, _, meta = read_path_file(path)
+        curve, cutting, meta = read_path_file(path)
     except ToolpathError as exc:
         raise EvaluationError(str(exc)) from None
-    return _path_file(path, curve, meta)
+    return _path_file(path, curve, cutting, meta)
 
 
 def path_file_from_dict(data: dict[str, Any], path: str | Path) -> PathFile:
@@ -86,19 +103,20 @@ def path_file_from_dict(data: dict[str, Any], path: str | Path) -> PathFile:
 
     path = Path(path)
     try:
-        curve, _, meta = path_from_dict(data)
+        curve, cutting, meta = path_from_dict(data)
     except ToolpathError as exc:
         raise EvaluationError(f"{path}: {exc}") from None
-    return _path_file(path, curve, meta)
+    return _path_file(path, curve, cutting, meta)
 
 
-def _path_file(path: Path, curve: Curve, meta: dict[str, Any]) -> PathFile:
+def _path_file(path: Path, curve: Curve, cutting: CuttingPath, meta: dict[str, Any]) -> PathFile:
     if len(curve.points) < 2:
         raise EvaluationError(f"{path}: curve.points must hold at least two [x, y, z] points")
     method = meta.get("method") or {}
     params = method.get("params") if isinstance(method, dict) else None
     source = meta.get("source")
     source_path = source.get("path") if isinstance(source, dict) else None
+    start = source.get("start_ns") if isinstance(source, dict) else None
     return PathFile(
         path=path,
         curve_points=np.asarray(curve.points, dtype=np.float64),
@@ -106,6 +124,11 @@ def _path_file(path: Path, curve: Curve, meta: dict[str, Any]) -> PathFile:
         params=dict(params) if isinstance(params, dict) else {},
         frame_id=str(meta.get("frame_id", "")),
         source=None if source_path is None else str(source_path),
+        setpoint_surface_points=np.asarray(cutting.surface_points, dtype=np.float64).reshape(-1, 3),
+        setpoint_flags=[list(f) for f in cutting.flags],
+        setpoint_positions=np.asarray(cutting.positions, dtype=np.float64).reshape(-1, 3),
+        setpoint_orientations_xyzw=np.asarray(cutting.orientations_xyzw).reshape(-1, 4),
+        source_start_ns=start if isinstance(start, int) and not isinstance(start, bool) else None,
     )
 
 
@@ -203,11 +226,13 @@ def evaluate_path_files(
     reference: str | Path | None = None,
     config: EvaluationConfig | None = None,
     recording_config: RecordingConfig | None = None,
+    align: bool = False,
 ) -> list[ReportRow]:
     """Evaluate path files: each against ``reference`` or the recording it names.
 
     A recording named by several path files is read once. The object name is the recording's
-    ``metadata["scrapcut"]["object"]``, else the path file's stem.
+    ``metadata["scrapcut"]["object"]``, else the path file's stem. ``align``: also the shape
+    error after a rigid alignment (:mod:`~scrapcut_cli.evaluation.align`).
     """
     if not paths:
         raise EvaluationError("no path files given")
@@ -224,7 +249,7 @@ def evaluate_path_files(
             if origin not in cache:
                 cache[origin] = load_reference(origin, config=recording_config)
             ref = cache[origin]
-        rows.append(evaluate_path_file(path_file, ref, config=config))
+        rows.append(evaluate_path_file(path_file, ref, config=config, align=align))
     return rows
 
 
@@ -235,11 +260,15 @@ def evaluate_path_file(
     config: EvaluationConfig,
     object_name: str | None = None,
     note: str = "",
+    align: bool = False,
 ) -> ReportRow:
-    """One report row: ``path_file``'s curve against ``reference``.
+    """One report row: ``path_file``'s curve and set-points against ``reference``.
 
     Raises EvaluationError when the two are in different frames (each known): distances
-    between a path in ``panda_link4`` and a reference in ``panda_link0`` mean nothing.
+    between a path in ``panda_link4`` and a reference in ``panda_link0`` mean nothing; and
+    when one is about 1000× the other's size (millimetres read as metres). The row carries
+    warnings (:func:`~scrapcut_cli.evaluation.checks.row_warnings`) and, with ``align``, the
+    rigid alignment separating shape error from calibration error.
     """
     if reference.frame_id and path_file.frame_id and reference.frame_id != path_file.frame_id:
         raise EvaluationError(
@@ -248,8 +277,28 @@ def evaluate_path_file(
             f"again with --base-frame {reference.frame_id}, or give a reference in "
             f"{path_file.frame_id!r})"
         )
+    check_scale(
+        path_file.curve_points,
+        reference.points,
+        path_name=str(path_file.path),
+        reference_name=str(reference.origin),
+    )
+    alignment = aligned = None
     try:
         error = path_error(path_file.curve_points, reference.points, config=config)
+        setpoints = setpoint_error(
+            path_file.setpoint_surface_points,
+            path_file.setpoint_flags,
+            reference.points,
+            config=config,
+        )
+        if align:
+            from scrapcut_cli.evaluation.align import align_curve
+
+            alignment = align_curve(
+                path_file.curve_points, reference.points, sample_spacing_m=config.sample_spacing_m
+            )
+            aligned = path_error(alignment.aligned_points, reference.points, config=config)
     except ScrapcutError as exc:
         raise EvaluationError(f"{path_file.path}: {exc}") from None
     return ReportRow(
@@ -262,4 +311,12 @@ def evaluate_path_file(
         curve_points=path_file.curve_points,
         reference_points=reference.points,
         oracle_views=reference.oracle_views,
+        name=path_file.name,
+        setpoints=setpoints,
+        warnings=tuple(row_warnings(error, setpoints)),
+        alignment=alignment,
+        aligned_error=aligned,
+        frame_id=path_file.frame_id or reference.frame_id or "",
+        setpoint_surface_points=path_file.setpoint_surface_points,
+        setpoint_flags=tuple(tuple(f) for f in path_file.setpoint_flags),
     )
