@@ -73,6 +73,16 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
         "batch",
         "Fit many recordings × a parameter grid on Dask; one table of results.",
     ),
+    "trajectory": (
+        "scrapcut_cli.commands.trajectory",
+        "trajectory",
+        "Joint trajectory of the Panda that cuts a path.",
+    ),
+    "simulate-cut": (
+        "scrapcut_cli.commands.simulate_cut",
+        "simulate_cut",
+        "Play a joint trajectory in pybullet and measure it.",
+    ),
 }
 
 

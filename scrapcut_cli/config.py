@@ -887,6 +887,36 @@ class EvaluationConfig:
 
 
 @dataclass(frozen=True)
+class MotionConfig:
+    """Joint trajectory (``scrapcut trajectory``): mount, tilts, moves, timing, collisions.
+
+    The torch body checked for collisions is the toolpath's (``toolpath.torch_length_m``,
+    ``torch_radius_m``, ``collision_min_points``), so both checks agree. Approach and retreat
+    run 100 mm along the torch axis at 50 mm/s; the cut's speed is the path's (the chart's).
+    """
+
+    tool_offset: str | None = None  # "x,y,z[,roll,pitch,yaw]" mm/deg or YAML/JSON; None: default
+    urdf: str | None = None  # None: pybullet_data's franka_panda/panda.urdf
+    max_tilt_deg: float = 20.0  # torch tilt allowed where the axis as given is not reachable
+    tilt_steps: int = 4
+    tilt_directions: int = 8
+    max_joint_step_rad: float = 0.25  # between neighbouring set-points; more is a flip
+    approach_m: float = 0.10
+    retreat_m: float = 0.10
+    travel_speed_m_s: float = 0.05  # TCP speed of approach and retreat
+    run_out_m: float = 0.010  # past the far edge, so the kerf leaves the piece
+    waypoint_spacing_m: float = 0.005  # IK waypoints of approach, retreat and run-out
+    sample_period_s: float = 0.1  # trajectory points (plus one at every set-point)
+    accel_time_s: float = 0.2  # speed-profile filters (timing.MoveProfile)
+    jerk_time_s: float = 0.05
+    limit_share: float = 0.5  # plan to this share of the velocity/acceleration/jerk limits
+    link_margin_m: float = 0.010  # clearance of the arm's capsules to the observed surface
+    floor_margin_m: float = 0.020
+    floor_z_m: float = 0.0  # the floor (or table) plane in the base frame
+    collision_voxel_m: float = 0.003  # the observed surface is thinned to this grid
+
+
+@dataclass(frozen=True)
 class ScrapcutConfig:
     """Every stage's parameters."""
 
@@ -901,6 +931,7 @@ class ScrapcutConfig:
     sim: SimConfig = field(default_factory=SimConfig)
     evaluation: EvaluationConfig = field(default_factory=EvaluationConfig)
     calibration: CalibrationConfig = field(default_factory=CalibrationConfig)
+    motion: MotionConfig = field(default_factory=MotionConfig)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON/TOML-ready dictionary of every parameter."""

@@ -116,6 +116,41 @@ class PandaKinematics:
             T = T @ chain[:, k]
         return T if np.asarray(q).ndim > 1 else T[0]
 
+    def link_frames(self, q: ArrayLike) -> FloatArray:
+        """T_base_link (S, 9, 4, 4) of panda_link0 … panda_link8 at joint samples (S, 7).
+
+        The z axis of link k (1–7) is joint k's axis: the URDF joints turn about their own z.
+        """
+        chain = self.chain(q)
+        out = np.empty((len(chain), 9, 4, 4))
+        out[:, 0] = np.eye(4)
+        for k in range(8):
+            out[:, k + 1] = out[:, k] @ chain[:, k]
+        return out
+
+    def tool_jacobian(
+        self, q: ArrayLike, T_flange_tool: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        """Tool poses T_base_tool (S, 4, 4) and geometric Jacobians (S, 6, 7) at (S, 7) joints.
+
+        Rows 0–2 map joint rates to the tool origin's linear velocity, rows 3–5 to the angular
+        velocity, both in the base frame: column k is (z_k × (p − o_k), z_k) for joint axis
+        z_k through o_k (the analytic Jacobian of a revolute chain).
+        """
+        frames = self.link_frames(q)
+        T = frames[:, 8] @ np.asarray(T_flange_tool, dtype=np.float64)
+        z = frames[:, 1:8, :3, 2]  # (S, 7, 3)
+        o = frames[:, 1:8, :3, 3]
+        p = T[:, None, :3, 3]
+        r = p - o
+        J = np.empty((len(frames), 6, 7))
+        # z × r written out: np.cross costs more than the whole chain for a handful of rows.
+        J[:, 0] = z[..., 1] * r[..., 2] - z[..., 2] * r[..., 1]
+        J[:, 1] = z[..., 2] * r[..., 0] - z[..., 0] * r[..., 2]
+        J[:, 2] = z[..., 0] * r[..., 1] - z[..., 1] * r[..., 0]
+        J[:, 3:] = np.swapaxes(z, 1, 2)
+        return T, J
+
     def within_limits(self, q: ArrayLike, margin: float = 0.0) -> bool:
         qq = np.asarray(q, dtype=np.float64)
         return bool(np.all(qq >= self.lower + margin) and np.all(qq <= self.upper - margin))

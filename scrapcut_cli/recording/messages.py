@@ -646,3 +646,45 @@ def path_points(msg: Any) -> NDArray[np.float64]:
 def frame_id_of(msg: Any) -> str:
     """Header frame id (leading slash removed)."""
     return _strip_slash(str(msg.header.frame_id))
+
+
+JOINT_TRAJECTORY = "trajectory_msgs/msg/JointTrajectory"
+
+
+def joint_trajectory_msg(
+    stamp_ns: int,
+    frame_id: str,
+    names: Sequence[str],
+    times_s: ArrayLike,
+    positions: ArrayLike,
+    velocities: ArrayLike | None = None,
+    accelerations: ArrayLike | None = None,
+) -> Any:
+    """``trajectory_msgs/JointTrajectory``: (T,) times from start (s) and (T, J) positions
+    (rad), optional velocities (rad/s) and accelerations (rad/s²)."""
+    t = np.asarray(times_s, dtype=np.float64).reshape(-1)
+    q = np.asarray(positions, dtype=np.float64).reshape(len(t), len(names))
+    qd = None if velocities is None else np.asarray(velocities, dtype=np.float64).reshape(q.shape)
+    qdd = (
+        None
+        if accelerations is None
+        else np.asarray(accelerations, dtype=np.float64).reshape(q.shape)
+    )
+    point = _type("trajectory_msgs/msg/JointTrajectoryPoint")
+    duration = _type("builtin_interfaces/msg/Duration")
+    empty = np.zeros(0)
+    points = []
+    for k in range(len(t)):
+        sec, nanosec = divmod(round(float(t[k]) * 1e9), 1_000_000_000)
+        points.append(
+            point(
+                positions=q[k].copy(),
+                velocities=empty if qd is None else qd[k].copy(),
+                accelerations=empty if qdd is None else qdd[k].copy(),
+                effort=empty,
+                time_from_start=duration(sec=int(sec), nanosec=int(nanosec)),
+            )
+        )
+    return _type(JOINT_TRAJECTORY)(
+        header=header(stamp_ns, frame_id), joint_names=list(names), points=points
+    )

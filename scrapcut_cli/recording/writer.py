@@ -306,6 +306,25 @@ class McapWriter:
         msg = m.joint_state_msg(stamp_ns, names, positions)
         self._write(topic, m.JOINT_STATE, msg, stamp_ns, log_time_ns)
 
+    def write_joint_trajectory(
+        self,
+        topic: str,
+        stamp_ns: int,
+        frame_id: str,
+        names: Sequence[str],
+        times_s: ArrayLike,
+        positions: ArrayLike,
+        velocities: ArrayLike | None = None,
+        accelerations: ArrayLike | None = None,
+        *,
+        log_time_ns: int | None = None,
+    ) -> None:
+        """``trajectory_msgs/JointTrajectory`` (see ``messages.joint_trajectory_msg``)."""
+        msg = m.joint_trajectory_msg(
+            stamp_ns, frame_id, names, times_s, positions, velocities, accelerations
+        )
+        self._write(topic, m.JOINT_TRAJECTORY, msg, stamp_ns, log_time_ns)
+
     # ------------------------------------------------------------------ internals
 
     def _write(
