@@ -542,6 +542,13 @@ class ToolpathConfig:
         8, 1, 360, "", "more than one direction per degree tries the same pose twice"
     )
     speed_table: str | None = None  # CSV of speeds; None: the bundled oxy-fuel table
+    # Start at an edge the line reaches (no pierce) and run out past a far edge (toolpath.ends):
+    # the observed surface must end within edge_gap_m of the paint's end; it counts as going on
+    # when seen edge_probe_m past it; measured in a corridor of edge_corridor_m around the line.
+    edge_start: bool = True
+    edge_gap_m: float = 0.006
+    edge_probe_m: float = 0.03
+    edge_corridor_m: float = 0.01
 
 
 @dataclass(frozen=True)

@@ -787,3 +787,42 @@ def under_file_size_limit(size: int, check: Callable[[], None]) -> None:
     _, wait_status = os.waitpid(pid, 0)
     if os.waitstatus_to_exitcode(wait_status) != 0:
         pytest.fail("in the child with a file size limit:\n" + b"".join(chunks).decode(), False)
+
+
+# --------------------------------------------------------------------------- Panda kinematics
+
+#: Franka's published modified (Craig) DH parameters of the Panda, joint by joint: (a_{i-1} m,
+#: d_i m, alpha_{i-1} rad); the flange adds d = 0.107 m (FCI documentation, "Robot and
+#: interface specifications", "Denavit–Hartenberg parameters"). An oracle independent of the
+#: URDF chain the planner uses.
+PANDA_DH = (
+    (0.0, 0.333, 0.0),
+    (0.0, 0.0, -np.pi / 2),
+    (0.0, 0.316, np.pi / 2),
+    (0.0825, 0.0, np.pi / 2),
+    (-0.0825, 0.384, -np.pi / 2),
+    (0.0, 0.0, np.pi / 2),
+    (0.088, 0.0, np.pi / 2),
+)
+PANDA_DH_FLANGE_D = 0.107
+
+
+def panda_dh_flange(q: ArrayLike) -> FloatArray:
+    """T_base_flange (4, 4) of joints (7,) from :data:`PANDA_DH`:
+    T_{i-1,i} = Rot_x(alpha_{i-1}) Trans_x(a_{i-1}) Rot_z(theta_i) Trans_z(d_i)."""
+
+    def link(a: float, d: float, alpha: float, theta: float) -> FloatArray:
+        ca, sa, ct, st = np.cos(alpha), np.sin(alpha), np.cos(theta), np.sin(theta)
+        return np.array(
+            [
+                [ct, -st, 0.0, a],
+                [st * ca, ct * ca, -sa, -d * sa],
+                [st * sa, ct * sa, ca, d * ca],
+                [0.0, 0.0, 0.0, 1.0],
+            ]
+        )
+
+    T = np.eye(4)
+    for (a, d, alpha), theta in zip(PANDA_DH, np.asarray(q, dtype=np.float64), strict=True):
+        T = T @ link(a, d, alpha, float(theta))
+    return T @ link(0.0, PANDA_DH_FLANGE_D, 0.0, 0.0)

@@ -50,7 +50,7 @@ class IkSettings:
 
     position_tol_m: float = 5e-5
     axis_tol_rad: float = 5e-4
-    max_iterations: int = 40
+    max_iterations: int = 100
     max_step_rad: float = 0.2
     joint_margin_rad: float = 0.01
     singular_threshold: float = 0.02

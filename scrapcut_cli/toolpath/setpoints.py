@@ -15,7 +15,10 @@ look-up table of the scrap's properties. :func:`make_cutting_path` does it in th
 4. torch poses: z into the surface (−axis), x along the curve tangent, tip at
    surface point + standoff · axis;
 5. speeds and time stamps from the cutting chart (:mod:`~scrapcut_cli.toolpath.speeds`), with
-   the pierce dwell at the start.
+   the pierce dwell at the start;
+6. how the cut starts and finishes (:mod:`~scrapcut_cli.toolpath.ends`): at an edge the line
+   reaches (preheat there, no pierce; the path is cut backwards when only its far end reaches
+   one) and with a run-out past a far edge; the summary's ``ends`` says what and why.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from scrapcut_cli.errors import ToolpathError
 from scrapcut_cli.fitting.curve import Curve
 from scrapcut_cli.geometry import cumulative_length, interpolate_polyline, matrix_to_quat_xyzw
 from scrapcut_cli.toolpath.collision import choose_torch_axes
+from scrapcut_cli.toolpath.ends import CutEndsDecision, cut_ends
 from scrapcut_cli.toolpath.normals import (
     estimate_path_normals,
     fill_unsupported,
@@ -71,8 +75,21 @@ def make_cutting_path(
     Returns
     -------
     CuttingPath
-        Set-points ordered along the curve; ``info`` counts flags and holds the timing figures.
+        Set-points in cutting order (along the curve, or against it when only its far end
+        reaches an edge); ``info`` counts flags, holds the timing figures and the ``ends``.
     """
+    return _cutting_path(curve, surface_base, surface_viewpoints, config=config, speeds=speeds)
+
+
+def _cutting_path(
+    curve: Curve,
+    surface_base: ArrayLike,
+    surface_viewpoints: ArrayLike,
+    *,
+    config: ToolpathConfig,
+    speeds: SpeedTable | None,
+    ends: CutEndsDecision | None = None,
+) -> CuttingPath:
     check_toolpath_config(config)
     surface = _points(surface_base, "surface_base")
     viewpoints = _points(surface_viewpoints, "surface_viewpoints")
@@ -110,6 +127,29 @@ def make_cutting_path(
         arc, normals, sigma_m=config.normal_smoothing_m, edge_angle_deg=config.edge_angle_deg
     )
     normals = perpendicular_to(normals, tangents)
+    if config.edge_start and ends is None:
+        trims = (
+            float(curve.info.get("end_trim_start_m") or 0.0),
+            float(curve.info.get("end_trim_end_m") or 0.0),
+        )
+        ends = cut_ends(
+            curve.points,
+            (normals[0], normals[-1]),
+            surface,
+            paint_past_m=trims,
+            gap_m=config.edge_gap_m,
+            probe_m=config.edge_probe_m,
+            corridor_m=config.edge_corridor_m,
+        )
+        if ends.reversed:
+            return _cutting_path(
+                curve.reversed(),
+                surface,
+                viewpoints,
+                config=config,
+                speeds=speeds,
+                ends=ends,
+            )
 
     torch = choose_torch_axes(
         surface_points,
@@ -159,6 +199,11 @@ def make_cutting_path(
         "cut_time_s": float(time[-1]),
         "speed_table": speeds.source,
     }
+    if ends is not None:
+        # The chart's pierce time is also the edge preheat (the bundled chart says so for thick
+        # plate; it lists no separate preheat), so the dwell is the same either way.
+        info["ends"] = ends.to_info()
+        info["dwell_s"] = float(time[0])
     return CuttingPath(
         positions=positions,
         orientations_xyzw=orientations,
@@ -284,12 +329,20 @@ def check_toolpath_config(config: ToolpathConfig) -> None:
         "torch_radius_m",
         "thickness_mm",
         "collision_min_points",
+        "edge_probe_m",
+        "edge_corridor_m",
     )
     for name in positive:
         value = getattr(config, name)
         if not value > 0:
             raise ToolpathError(f"toolpath.{name} must be positive, got {value}")
-    for name in ("normal_smoothing_m", "tilt_steps", "tilt_directions", "min_surface_points"):
+    for name in (
+        "normal_smoothing_m",
+        "tilt_steps",
+        "tilt_directions",
+        "min_surface_points",
+        "edge_gap_m",
+    ):
         if getattr(config, name) < 0:
             raise ToolpathError(f"toolpath.{name} must be >= 0, got {getattr(config, name)}")
     if not 0 <= config.max_tilt_deg < 90:
