@@ -60,3 +60,11 @@ def test_out_of_reach_and_joint_limits_are_named(ik: TorchIk) -> None:
     # Right above the base, torch pointing straight down at the column: inside its own base.
     inside = ik.solve([0.0, 0.0, 0.1], [0.0, 0.0, -1.0], np.array(Q_READY))
     assert not inside.converged
+
+
+def test_the_reach_bound_never_refuses_a_reachable_target(ik: TorchIk) -> None:
+    qs = np.random.default_rng(5).uniform(ik.lower, ik.upper, (2000, 7))
+    T = ik.tool_poses(qs)
+    assert not any(ik.beyond_reach(t[:3, 3], t[:3, 2]) for t in T)
+    # ... and it does refuse what is clearly beyond the arm.
+    assert ik.beyond_reach([1.2, 0.0, 0.3], [0.0, 0.0, -1.0])

@@ -30,6 +30,8 @@ from scrapcut_cli.motion.panda import Q_READY
 
 FloatArray = NDArray[np.float64]
 
+#: IK iterations per tilt candidate (seeded from the neighbour, a reachable one needs few).
+TILT_ITERATIONS = 15
 #: Set-point outcomes.
 REACHED = "reached"
 TILTED = "tilted"
@@ -82,6 +84,14 @@ class PathSolution:
         return np.array([s in (REACHED, TILTED) for s in self.status], dtype=bool)
 
 
+def _posture_dependent(reason: str) -> bool:
+    """Could another arm posture (another start) avoid this failure? Reach and the torch's own
+    collisions do not depend on it; joint limits, flips and the arm's collisions do."""
+    return reason in ("joint_limits", "flip") or (
+        reason.endswith(("/surface", "/floor")) and not reason.startswith("torch/")
+    )
+
+
 class PathFollower:
     """Solves a path's set-points in order (see the module docstring)."""
 
@@ -98,10 +108,16 @@ class PathFollower:
     # ------------------------------------------------------------------ one target
 
     def _try(
-        self, tip: FloatArray, axis: FloatArray, q_prev: FloatArray, allowed: float
+        self,
+        tip: FloatArray,
+        axis: FloatArray,
+        q_prev: FloatArray,
+        allowed: float,
+        *,
+        max_iterations: int | None = None,
     ) -> tuple[IkResult | None, str, int]:
         """Solve one target from ``q_prev``; (result or None, reason, flips avoided)."""
-        r = self.ik.solve(tip, axis, q_prev)
+        r = self.ik.solve(tip, axis, q_prev, max_iterations=max_iterations)
         if not r.converged:
             return None, r.reason, 0
         avoided = 0
@@ -205,7 +221,7 @@ class PathFollower:
             for phi in 2 * np.pi * np.arange(st.tilt_directions) / st.tilt_directions:
                 a = np.cos(theta) * axis + np.sin(theta) * (np.cos(phi) * u + np.sin(phi) * w)
                 t = surface - standoff * a
-                r, _, _ = self._try(t, a, q_prev, allowed)
+                r, _, _ = self._try(t, a, q_prev, allowed, max_iterations=TILT_ITERATIONS)
                 if r is None:
                     continue
                 step = float(np.max(np.abs(r.q - q_prev)))
@@ -269,7 +285,7 @@ class PathFollower:
             sol = self.follow(P, A, surface_points, q0)
             if best is None or sol.score > best.score:
                 best = sol
-            if all(s == REACHED for s in best.status):
-                break  # every set-point as given: the other starts cannot do better
+            if not any(_posture_dependent(r) for r in best.reason):
+                break  # what is left fails whatever the posture
         assert best is not None
         return best

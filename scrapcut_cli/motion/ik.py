@@ -58,6 +58,7 @@ class IkSettings:
     limit_gain: float = 0.02
     manipulability_gain: float = 0.02
     null_step_rad: float = 0.01
+    stall_iterations: int = 6  # iterations without progress that end a solve
 
 
 @dataclass(frozen=True, eq=False)
@@ -104,6 +105,28 @@ class TorchIk:
         self.upper = limits.upper - m
         self._mid = 0.5 * (limits.lower + limits.upper)
         self._half = 0.5 * (limits.upper - limits.lower)
+        # Reach bound: the flange's distance from the shoulder (joint 2's origin, on joint 1's
+        # axis) is at most the wrist centre's (joint 5's origin; on a Panda it depends on the
+        # elbow, joint 4, alone) plus the wrist centre's distance to the flange (constant).
+        # Sampled over joint 4's range with a few postures of the others, plus 1 cm.
+        q = np.tile(np.asarray(self._mid), (4 * 201, 1))
+        q[:, 3] = np.tile(np.linspace(limits.lower[3], limits.upper[3], 201), 4)
+        rng = np.random.default_rng(0)
+        others = [0, 1, 2, 4, 5, 6]
+        q[201:, others] = rng.uniform(limits.lower[others], limits.upper[others], (3 * 201, 6))
+        F = kin.link_frames(q)
+        shoulder, wrist, flange = F[:, 2, :3, 3], F[:, 5, :3, 3], F[:, 8, :3, 3]
+        self._shoulder = np.asarray(shoulder[0], dtype=np.float64)
+        off_axis = float(np.max(np.linalg.norm(shoulder - self._shoulder, axis=1)))
+        self._reach = (
+            float(np.max(np.linalg.norm(wrist - shoulder, axis=1)))
+            + float(np.max(np.linalg.norm(flange - wrist, axis=1)))
+            + off_axis
+            + 0.01
+        )
+        u = self.T_flange_tool[:3, :3].T @ self.T_flange_tool[:3, 3]  # flange→tip, tool frame
+        self._tip_axial = float(u[2])
+        self._tip_lateral = float(np.hypot(u[0], u[1]))
 
     # ------------------------------------------------------------------ pieces
 
@@ -139,6 +162,13 @@ class TorchIk:
             grad = -0.5 * (logdet[1:] - logdet[0]) / _GRADIENT_STEP
         return e, rows[0], float(np.linalg.norm(dp)), abs(angle), grad
 
+    def beyond_reach(self, target_position: ArrayLike, target_axis: ArrayLike) -> bool:
+        """True when no joint values can place the tip there (a conservative bound: False
+        does not promise a solution)."""
+        a = np.asarray(target_axis, dtype=np.float64)
+        c = np.asarray(target_position, dtype=np.float64) - self._tip_axial * a / np.linalg.norm(a)
+        return bool(np.linalg.norm(c - self._shoulder) - self._tip_lateral > self._reach + 1e-3)
+
     # ------------------------------------------------------------------ solve
 
     def solve(
@@ -161,6 +191,8 @@ class TorchIk:
         a_star = np.asarray(target_axis, dtype=np.float64)
         a_star = a_star / np.linalg.norm(a_star)
         q = np.clip(np.asarray(q_seed, dtype=np.float64), self.lower, self.upper)
+        if self.beyond_reach(p_star, a_star):
+            return IkResult(q, False, np.inf, np.inf, 0, "out_of_reach")
         limit = s.max_iterations if max_iterations is None else max_iterations
         best = (np.inf, q.copy(), np.inf, np.inf)
         extra = posture_iterations
@@ -180,7 +212,7 @@ class TorchIk:
                 if extra <= 0:
                     break
                 extra -= 1
-            elif stall >= 8 or it > limit:
+            elif stall >= s.stall_iterations or it > limit:
                 break
             dq_task, null = _damped_step(J, e, s.singular_threshold, s.max_damping)
             assert grad is not None

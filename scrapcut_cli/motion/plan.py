@@ -250,6 +250,7 @@ def plan_trajectory(
     profile = MoveProfile(cfg.accel_time_s, cfg.jerk_time_s)
     segments: list[_Segment] = []
     scales: dict[str, float] = {}
+    dwell_phase = "preheat" if ends.start == "edge" else "pierce"
     if len(approach_q):
         knots_q = np.vstack([approach_q[::-1], q_first])
         knots_s = np.concatenate([[0.0], approach_s[-1] - approach_s[::-1][1:], [approach_s[-1]]])
@@ -263,8 +264,8 @@ def plan_trajectory(
         scales["approach"] = move.time_scale
         seg = _sample(move, cfg.sample_period_s, "approach")
         seg.setpoint[-1] = first
+        seg.phase[-1] = dwell_phase  # arrived: the dwell starts
         segments.append(seg)
-    dwell_phase = "preheat" if ends.start == "edge" else "pierce"
     dwell = float(path.time[0])
     segments.append(
         _Segment(
