@@ -546,9 +546,27 @@ class ToolpathConfig:
     # the observed surface must end within edge_gap_m of the paint's end; it counts as going on
     # when seen edge_probe_m past it; measured in a corridor of edge_corridor_m around the line.
     edge_start: bool = True
-    edge_gap_m: float = 0.006
-    edge_probe_m: float = 0.03
-    edge_corridor_m: float = 0.01
+    edge_gap_m: float = rng(
+        0.006,
+        0.0,
+        0.1,
+        "m",
+        "a few mm of paint blur and overspray; 100 mm from an edge is not at it",
+    )
+    edge_probe_m: float = rng(
+        0.03,
+        0.004,
+        0.5,
+        "m",
+        "one 4 mm surface voxel at least; a scan's views see about 0.5 m of a piece",
+    )
+    edge_corridor_m: float = rng(
+        0.01,
+        0.002,
+        0.2,
+        "m",
+        "half a 4 mm surface voxel at least; 0.2 m around a line is another part of the piece",
+    )
 
 
 @dataclass(frozen=True)
@@ -904,23 +922,71 @@ class MotionConfig:
 
     tool_offset: str | None = None  # "x,y,z[,roll,pitch,yaw]" mm/deg or YAML/JSON; None: default
     urdf: str | None = None  # None: pybullet_data's franka_panda/panda.urdf
-    max_tilt_deg: float = 20.0  # torch tilt allowed where the axis as given is not reachable
-    tilt_steps: int = 4
-    tilt_directions: int = 8
-    max_joint_step_rad: float = 0.25  # between neighbouring set-points; more is a flip
-    approach_m: float = 0.10
-    retreat_m: float = 0.10
-    travel_speed_m_s: float = 0.05  # TCP speed of approach and retreat
-    run_out_m: float = 0.010  # past the far edge, so the kerf leaves the piece
-    waypoint_spacing_m: float = 0.005  # IK waypoints of approach, retreat and run-out
-    sample_period_s: float = 0.1  # trajectory points (plus one at every set-point)
-    accel_time_s: float = 0.2  # speed-profile filters (timing.MoveProfile)
-    jerk_time_s: float = 0.05
-    limit_share: float = 0.5  # plan to this share of the velocity/acceleration/jerk limits
-    link_margin_m: float = 0.010  # clearance of the arm's capsules to the observed surface
-    floor_margin_m: float = 0.020
-    floor_z_m: float = 0.0  # the floor (or table) plane in the base frame
-    collision_voxel_m: float = 0.003  # the observed surface is thinned to this grid
+    # torch tilt allowed where the axis as given is not reachable
+    max_tilt_deg: float = rng(20.0, 0.0, 89.0, "deg", "at 90 deg the torch lies on the plate")
+    tilt_steps: int = rng(
+        4, 1, 90, "", "more than one step per degree of tilt tries the same pose twice"
+    )
+    tilt_directions: int = rng(
+        8, 1, 360, "", "more than one direction per degree tries the same pose twice"
+    )
+    # between neighbouring set-points; more is a flip
+    max_joint_step_rad: float = rng(
+        0.25,
+        0.01,
+        3.2,
+        "rad",
+        "under 0.01 rad a 5 mm step of a wrist near a singularity is refused; over pi any flip "
+        "passes",
+    )
+    approach_m: float = rng(
+        0.10, 0.005, 1.0, "m", "one waypoint at least; the Panda reaches about 0.85 m"
+    )
+    retreat_m: float = rng(
+        0.10, 0.005, 1.0, "m", "one waypoint at least; the Panda reaches about 0.85 m"
+    )
+    # TCP speed of approach and retreat
+    travel_speed_m_s: float = rng(
+        0.05,
+        0.001,
+        1.7,
+        "m/s",
+        "1 mm/s crawls; 1.7 m/s is the Panda's Cartesian velocity limit",
+    )
+    # past the far edge, so the kerf leaves the piece
+    run_out_m: float = rng(0.010, 0.0, 0.2, "m", "0 is no run-out; 0.2 m cuts air for long")
+    # IK waypoints of approach, retreat and run-out
+    waypoint_spacing_m: float = rng(
+        0.005, 1e-4, 0.1, "m", "0.1 mm is the Panda's repeatability; 0.1 m skips obstacles"
+    )
+    # trajectory points (plus one at every set-point)
+    sample_period_s: float = rng(
+        0.1, 0.001, 1.0, "s", "1 ms is Franka's control period; over 1 s hides the ramps"
+    )
+    # speed-profile filters (motion.timing.MoveProfile)
+    accel_time_s: float = rng(
+        0.2, 0.002, 10.0, "s", "2 control periods at least; 10 s to reach a cutting speed crawls"
+    )
+    jerk_time_s: float = rng(
+        0.05, 0.001, 10.0, "s", "one control period at least; 10 s to reach a cutting speed crawls"
+    )
+    # plan to this share of the velocity/acceleration/jerk limits
+    limit_share: float = rng(0.5, 0.01, 1.0, "", "a share of Franka's limits: over 1 exceeds them")
+    # clearance of the arm's capsules to the observed surface
+    link_margin_m: float = rng(
+        0.010, 0.0, 0.2, "m", "0 touches; 0.2 m keeps the arm away from every piece it cuts"
+    )
+    floor_margin_m: float = rng(
+        0.020, 0.0, 0.5, "m", "0 touches; 0.5 m keeps the arm off most pieces on the floor"
+    )
+    # the floor (or table) plane in the base frame
+    floor_z_m: float = rng(
+        0.0, -2.0, 1.0, "m", "a Panda stands on a table at most 2 m high, or on the floor"
+    )
+    # the observed surface is thinned to this grid
+    collision_voxel_m: float = rng(
+        0.003, 5e-4, 0.05, "m", "finer than 0.5 mm is below depth noise; 5 cm misses a flange"
+    )
 
 
 @dataclass(frozen=True)

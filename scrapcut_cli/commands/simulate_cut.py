@@ -8,7 +8,13 @@ from typing import Any
 
 import click
 
-from scrapcut_cli.commands._options import build_config, config_option, recording_options
+from scrapcut_cli.commands._options import (
+    bounded,
+    build_config,
+    config_option,
+    config_type,
+    recording_options,
+)
 
 
 @click.command("simulate-cut")
@@ -29,21 +35,21 @@ from scrapcut_cli.commands._options import build_config, config_option, recordin
 )
 @click.option(
     "--time-step-ms",
-    type=click.FloatRange(min=0.1, max=20.0),
+    type=bounded(0.1, 20.0, "pybullet is unstable beyond 20 ms; 0.1 ms is ten times Franka's rate"),
     default=1.0,
     show_default=True,
     help="Simulation and control step [ms] (Franka's controller runs at 1 ms).",
 )
 @click.option(
     "--check-period-ms",
-    type=click.FloatRange(min=1.0),
+    type=bounded(1.0, 10_000.0, "one check per control period at most; 10 s misses a pass"),
     default=50.0,
     show_default=True,
     help="Collision checks along the simulated motion, every [ms].",
 )
 @click.option(
     "--floor-z-mm",
-    type=float,
+    type=config_type("motion.floor_z_m", 1e-3),
     default=0.0,
     show_default=True,
     help="Height of the floor in the base frame [mm].",

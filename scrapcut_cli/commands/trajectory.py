@@ -8,7 +8,13 @@ from typing import Any
 
 import click
 
-from scrapcut_cli.commands._options import build_config, config_option, mm_to_m, recording_options
+from scrapcut_cli.commands._options import (
+    build_config,
+    config_option,
+    config_type,
+    mm_to_m,
+    recording_options,
+)
 
 
 @click.command("trajectory")
@@ -50,25 +56,25 @@ from scrapcut_cli.commands._options import build_config, config_option, mm_to_m,
 )
 @click.option(
     "--max-tilt-deg",
-    type=click.FloatRange(min=0.0, max=89.0),
+    type=config_type("motion.max_tilt_deg"),
     default=None,
     help="Largest torch tilt where a set-point cannot be reached as given [deg] (default 20).",
 )
 @click.option(
     "--floor-z-mm",
-    type=float,
+    type=config_type("motion.floor_z_m", 1e-3),
     default=None,
     help="Height of the floor (or table) below the robot base, base frame z [mm] (default 0).",
 )
 @click.option(
     "--approach-mm",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=config_type("motion.approach_m", 1e-3),
     default=None,
     help="Approach and retreat along the torch axis [mm] (default 100).",
 )
 @click.option(
     "--run-out-mm",
-    type=click.FloatRange(min=0.0),
+    type=config_type("motion.run_out_m", 1e-3),
     default=None,
     help="Run-out past a far edge [mm] (default 10).",
 )

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from scrapcut_cli.config import MotionConfig
+from scrapcut_cli.config import MotionConfig, validate_section
 from scrapcut_cli.errors import MotionError
 from scrapcut_cli.geometry import quat_xyzw_to_matrix
 from scrapcut_cli.motion.collision import CollisionChecker, CollisionSettings
@@ -166,7 +166,7 @@ def plan_trajectory(
         When no set-point can be reached at all.
     """
     cfg = config or MotionConfig()
-    _check_config(cfg)
+    validate_section(cfg, "motion")
     if len(path) == 0:
         raise MotionError("the path has no set-points")
     kin = kin or PandaKinematics(cfg.urdf)
@@ -352,29 +352,6 @@ def plan_trajectory(
 
 
 # --------------------------------------------------------------------------- pieces
-
-
-def _check_config(cfg: MotionConfig) -> None:
-    for name in (
-        "approach_m",
-        "retreat_m",
-        "travel_speed_m_s",
-        "waypoint_spacing_m",
-        "sample_period_s",
-        "accel_time_s",
-        "jerk_time_s",
-        "max_joint_step_rad",
-        "collision_voxel_m",
-    ):
-        if not getattr(cfg, name) > 0:
-            raise MotionError(f"motion.{name} must be positive, got {getattr(cfg, name)}")
-    for name in ("run_out_m", "link_margin_m", "floor_margin_m", "tilt_steps", "tilt_directions"):
-        if getattr(cfg, name) < 0:
-            raise MotionError(f"motion.{name} must be >= 0, got {getattr(cfg, name)}")
-    if not 0 <= cfg.max_tilt_deg < 90:
-        raise MotionError(f"motion.max_tilt_deg must be in [0, 90), got {cfg.max_tilt_deg}")
-    if not 0 < cfg.limit_share <= 1:
-        raise MotionError(f"motion.limit_share must be in (0, 1], got {cfg.limit_share}")
 
 
 def _end_tangent(surface_points: FloatArray, axis: FloatArray) -> FloatArray | None:

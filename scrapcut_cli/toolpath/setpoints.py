@@ -329,20 +329,12 @@ def check_toolpath_config(config: ToolpathConfig) -> None:
         "torch_radius_m",
         "thickness_mm",
         "collision_min_points",
-        "edge_probe_m",
-        "edge_corridor_m",
     )
     for name in positive:
         value = getattr(config, name)
         if not value > 0:
             raise ToolpathError(f"toolpath.{name} must be positive, got {value}")
-    for name in (
-        "normal_smoothing_m",
-        "tilt_steps",
-        "tilt_directions",
-        "min_surface_points",
-        "edge_gap_m",
-    ):
+    for name in ("normal_smoothing_m", "tilt_steps", "tilt_directions", "min_surface_points"):
         if getattr(config, name) < 0:
             raise ToolpathError(f"toolpath.{name} must be >= 0, got {getattr(config, name)}")
     if not 0 <= config.max_tilt_deg < 90:
