@@ -136,6 +136,9 @@ def trajectory_from_files(
     path_file = Path(path_file)
     _, path, meta = read_path_file(path_file)
     frame_id = str(meta["frame_id"])
+    # The robot and the torch first: a bad URDF or mount fails before the recording is read.
+    kin = PandaKinematics(cfg.motion.urdf)
+    mount = resolve_mount(cfg.motion, meta.get("config", {}))
     rec_path, rec_how = _find_recording(path_file, meta, recording)
 
     surface: FloatArray | None = None
@@ -179,8 +182,6 @@ def trajectory_from_files(
         path = _moved(path, T_base_path)
         if surface is not None:
             surface = transform_points(T_base_path, surface)
-    kin = PandaKinematics(cfg.motion.urdf)
-    mount = resolve_mount(cfg.motion, meta.get("config", {}))
     tp = meta.get("config", {}).get("toolpath", {}) if isinstance(meta.get("config"), dict) else {}
     min_points = int(tp.get("collision_min_points", 3)) if isinstance(tp, dict) else 3
     traj = plan_trajectory(
