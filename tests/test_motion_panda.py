@@ -92,6 +92,7 @@ def test_unreadable_urdfs_raise_one_clear_error(
 def test_motion_never_imports_the_simulator() -> None:
     code = (
         "import sys, scrapcut_cli.motion.panda as m\n"
+        "import scrapcut_cli.motion.recipe, scrapcut_cli.motion.trajfile\n"
         "m.PandaKinematics()\n"
         "bad = [n for n in sys.modules if n == 'pybullet' or n.startswith('scrapcut_cli.sim')]\n"
         "print(','.join(bad))\n"

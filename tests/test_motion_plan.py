@@ -18,7 +18,11 @@ from scrapcut_cli.config import MotionConfig, ToolpathConfig
 from scrapcut_cli.errors import MotionError
 from scrapcut_cli.fitting.curve import Curve
 from scrapcut_cli.geometry import quat_xyzw_to_matrix
+from scrapcut_cli.motion.collision import CollisionChecker
+from scrapcut_cli.motion.follow import FollowSettings, PathFollower
+from scrapcut_cli.motion.ik import TorchIk
 from scrapcut_cli.motion.limits import panda_limits
+from scrapcut_cli.motion.panda import PandaKinematics
 from scrapcut_cli.motion.plan import Trajectory, plan_trajectory
 from scrapcut_cli.motion.tool import default_mount
 from scrapcut_cli.motion.trajfile import (
@@ -174,6 +178,27 @@ def test_far_setpoints_are_flagged_with_a_reason_and_tilts_stay_within_the_bound
         traj, source={}, limits=panda_limits(), config={}, urdf="x", created="2026-01-01"
     )
     assert [sp["status"] for sp in data["setpoints"]] == sol.status
+
+
+def test_large_joint_steps_are_walked_or_refused_as_flips() -> None:
+    path, cloud = _path(0.48, 0.54, (0.40, 0.60))
+    # A bound below the joints' step per set-point: every step is walked through
+    # intermediate targets (and counted) ...
+    walked = _plan(path, cloud, max_joint_step_rad=0.012)
+    assert walked.summary["flips_avoided"] > 0
+    # ... and with one far below it (under the configurable range) even the walk's eighths
+    # are too large: refused as flips (the bound grows with each skipped set-point).
+    kin = PandaKinematics()
+    ik = TorchIk(kin, default_mount().T_flange_tool, panda_limits(kin.lower, kin.upper))
+    follower = PathFollower(
+        ik,
+        CollisionChecker(kin, default_mount(), cloud),
+        FollowSettings(max_joint_step_rad=0.0005, max_tilt_deg=0.0),
+    )
+    axes = quat_xyzw_to_matrix(path.orientations_xyzw)[:, :, 2]
+    refused = follower.follow_best(path.positions, axes, path.surface_points)
+    assert refused.status[0] == "reached"
+    assert "flip" in refused.reason and refused.status[1] == "unreachable"
 
 
 def test_the_floor_above_the_piece_leaves_nothing_reachable() -> None:
