@@ -953,6 +953,10 @@ class MotionConfig:
         "m/s",
         "1 mm/s crawls; 1.7 m/s is the Panda's Cartesian velocity limit",
     )
+    # joint speed of the transit between two cuts (around set-points it cannot reach)
+    transit_speed_rad_s: float = rng(
+        0.5, 0.01, 2.175, "rad/s", "0.01 rad/s crawls; 2.175 rad/s is the Panda's joint limit"
+    )
     # past the far edge, so the kerf leaves the piece
     run_out_m: float = rng(0.010, 0.0, 0.2, "m", "0 is no run-out; 0.2 m cuts air for long")
     # IK waypoints of approach, retreat and run-out
@@ -982,6 +986,16 @@ class MotionConfig:
     # the floor (or table) plane in the base frame
     floor_z_m: float = rng(
         0.0, -2.0, 1.0, "m", "a Panda stands on a table at most 2 m high, or on the floor"
+    )
+    # the space near the piece the camera never saw counts as an obstacle (motion.observed)
+    avoid_unseen: bool = True
+    unseen_voxel_m: float = rng(
+        0.01,
+        0.004,
+        0.1,
+        "m",
+        "free space is carved on this grid: under 4 mm rays miss voxels between them; 10 cm "
+        "hides a flange",
     )
     # the observed surface is thinned to this grid
     collision_voxel_m: float = rng(

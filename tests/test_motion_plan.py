@@ -180,14 +180,14 @@ def test_far_setpoints_are_flagged_with_a_reason_and_tilts_stay_within_the_bound
     assert [sp["status"] for sp in data["setpoints"]] == sol.status
 
 
-def test_large_joint_steps_are_walked_or_refused_as_flips() -> None:
+def test_large_joint_steps_are_walked_or_become_a_new_cut() -> None:
     path, cloud = _path(0.48, 0.54, (0.40, 0.60))
     # A bound below the joints' step per set-point: every step is walked through
     # intermediate targets (and counted) ...
     walked = _plan(path, cloud, max_joint_step_rad=0.012)
-    assert walked.summary["flips_avoided"] > 0
+    assert walked.summary["flips_avoided"] > 0 and walked.summary["cut_segments"] == 1
     # ... and with one far below it (under the configurable range) even the walk's eighths
-    # are too large: refused as flips (the bound grows with each skipped set-point).
+    # jump: no flip mid-cut, the set-point starts a new cut in its own posture.
     kin = PandaKinematics()
     ik = TorchIk(kin, default_mount().T_flange_tool, panda_limits(kin.lower, kin.upper))
     follower = PathFollower(
@@ -196,9 +196,9 @@ def test_large_joint_steps_are_walked_or_refused_as_flips() -> None:
         FollowSettings(max_joint_step_rad=0.0005, max_tilt_deg=0.0),
     )
     axes = quat_xyzw_to_matrix(path.orientations_xyzw)[:, :, 2]
-    refused = follower.follow_best(path.positions, axes, path.surface_points)
-    assert refused.status[0] == "reached"
-    assert "flip" in refused.reason and refused.status[1] == "unreachable"
+    split = follower.follow_best(path.positions, axes, path.surface_points)
+    assert split.status == ["reached"] * len(path)
+    assert split.breaks and split.breaks[0] == 1
 
 
 def test_the_floor_above_the_piece_leaves_nothing_reachable() -> None:

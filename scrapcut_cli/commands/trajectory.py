@@ -191,7 +191,11 @@ def _render(summary: dict[str, Any], path_file: Path) -> None:
             f"{summary['unreachable']} unreachable, {summary['in_collision']} in collision"
             + (f" ({reasons})" if reasons else ""),
         ),
-        ("executable", f"{100 * summary['executable_share']:.1f} % of the set-points"),
+        (
+            "executable",
+            f"{100 * summary['executable_share']:.1f} % of the set-points, in "
+            f"{summary['cut_segments']} cut(s)",
+        ),
         (
             "accuracy",
             f"tip {summary['tip_error_max_mm']:.3f} mm, axis {summary['axis_error_max_deg']:.3f}° "
@@ -219,7 +223,8 @@ def _render(summary: dict[str, Any], path_file: Path) -> None:
         (
             "collisions",
             f"{summary['trajectory_collisions']} of {summary['points']} points; observed surface: "
-            f"{summary['observed_surface']} ({summary['observed_points']} points)",
+            f"{summary['observed_surface']} ({summary['observed_points']} points, "
+            f"{summary['unseen_voxels']} unseen voxels near the piece avoided)",
         ),
         ("robot base", summary["robot_base"]),
         ("time", f"{summary['time_s']['total']:.2f} s (plan {summary['time_s']['plan']:.2f} s)"),

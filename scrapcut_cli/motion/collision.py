@@ -144,6 +144,9 @@ class CollisionChecker:
     points_base : (N, 3) float64, metres, base frame, optional
         The observed surface (thinned here to ``settings.voxel_m``); None or empty: floor only.
     settings : CollisionSettings
+    unseen_base : (M, 3) float64, metres, base frame, optional
+        Centres of voxels near the piece the camera never saw (``motion.observed``): a body
+        whose sphere reaches one collides (``<body>/unseen``), whatever may be there.
     """
 
     def __init__(
@@ -152,6 +155,8 @@ class CollisionChecker:
         mount: TorchMount,
         points_base: ArrayLike | None,
         settings: CollisionSettings | None = None,
+        *,
+        unseen_base: ArrayLike | None = None,
     ) -> None:
         self.kin = kin
         self.settings = settings or CollisionSettings()
@@ -166,6 +171,9 @@ class CollisionChecker:
             pts = pts[np.sort(first)]
         self.points = pts
         self._tree = cKDTree(pts) if len(pts) >= self.settings.min_points else None
+        unseen = np.zeros((0, 3)) if unseen_base is None else np.asarray(unseen_base, float)
+        self.unseen = unseen.reshape(-1, 3)
+        self._unseen_tree = cKDTree(self.unseen) if len(self.unseen) else None
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -182,8 +190,9 @@ class CollisionChecker:
         return np.asarray(np.einsum("smij,mj->smi", R, sp.centres) + t)
 
     def check(self, q: ArrayLike) -> list[str | None]:
-        """Per joint sample (S, 7): None when clear, else ``<body>/surface`` or ``<body>/floor``
-        for the first colliding body (arm links from the base outwards, then the torch)."""
+        """Per joint sample (S, 7): None when clear, else ``<body>/surface``, ``<body>/unseen``
+        or ``<body>/floor`` for the first colliding body (arm links from the base outwards,
+        then the torch)."""
         qs = np.atleast_2d(np.asarray(q, dtype=np.float64))
         centres = self.sphere_centres(qs)
         sp, st = self.spheres, self.settings
@@ -197,10 +206,17 @@ class CollisionChecker:
             )
             kth = np.asarray(d).reshape(len(qs), -1, k)[:, :, -1] if k > 1 else np.asarray(d)
             hit_cloud = kth.reshape(len(qs), -1) <= reach[None]
+        hit_unseen = np.zeros_like(hit_floor)
+        if self._unseen_tree is not None:
+            d1, _ = self._unseen_tree.query(
+                centres.reshape(-1, 3), k=1, distance_upper_bound=float(sp.radii.max())
+            )
+            hit_unseen = np.asarray(d1).reshape(len(qs), -1) <= sp.radii[None]
         out: list[str | None] = []
         for s in range(len(qs)):
             found = None
-            for kind, mask in (("surface", hit_cloud[s]), ("floor", hit_floor[s])):
+            masks = (("surface", hit_cloud[s]), ("unseen", hit_unseen[s]), ("floor", hit_floor[s]))
+            for kind, mask in masks:
                 if mask.any():
                     body = sp.names[int(sp.bodies[int(np.argmax(mask))])]
                     found = f"{body}/{kind}"

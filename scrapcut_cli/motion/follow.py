@@ -67,6 +67,11 @@ class PathSolution:
         The tip position and torch axis (along the jet) solved for (tilted where tilted).
     tilt_rad : (N,) float64
         Tilt away from the path's torch axis.
+    flips_avoided : int
+        Set-points reached by walking through intermediate targets instead of jumping.
+    breaks : list of int
+        Set-points reached only in another posture of the arm (a flip from the previous one):
+        the cut must stop before them and start again there.
     """
 
     q: FloatArray
@@ -77,6 +82,7 @@ class PathSolution:
     tilt_rad: FloatArray
     flips_avoided: int = 0
     score: tuple[float, ...] = field(default_factory=tuple)
+    breaks: list[int] = field(default_factory=list)
 
     @property
     def ok(self) -> NDArray[np.bool_]:
@@ -88,7 +94,7 @@ def _posture_dependent(reason: str) -> bool:
     """Could another arm posture (another start) avoid this failure? Reach and the torch's own
     collisions do not depend on it; joint limits, flips and the arm's collisions do."""
     return reason in ("joint_limits", "flip") or (
-        reason.endswith(("/surface", "/floor")) and not reason.startswith("torch/")
+        reason.endswith(("/surface", "/unseen", "/floor")) and not reason.startswith("torch/")
     )
 
 
@@ -115,20 +121,33 @@ class PathFollower:
         allowed: float,
         *,
         max_iterations: int | None = None,
+        walk: bool = True,
     ) -> tuple[IkResult | None, str, int]:
-        """Solve one target from ``q_prev``; (result or None, reason, flips avoided)."""
+        """Solve one target from ``q_prev``; (result or None, reason, flips avoided).
+
+        ``walk``: when the step is too large, try reaching the target through intermediate
+        targets before calling it a flip (not for tilt candidates: another tilt is cheaper).
+        """
         r = self.ik.solve(tip, axis, q_prev, max_iterations=max_iterations)
         if not r.converged:
             return None, r.reason, 0
         avoided = 0
         if float(np.max(np.abs(r.q - q_prev))) > allowed:
+            if not walk:
+                return None, "flip", 0
             walked = self._walk(tip, axis, q_prev, allowed)
             if walked is None:
                 return None, "flip", 0
             r, avoided = walked, 1
-        hit = self.checker.check(r.q)[0]
-        if hit is not None:
-            return None, hit, avoided
+        # The motion from the neighbour must be clear too (on the way from one lean of the
+        # torch to another the holder or wrist can swing through the piece): checked at thirds
+        # of the joint step when the two belong to one cut.
+        samples = r.q[None]
+        if np.isfinite(allowed):
+            samples = q_prev + np.array([[1 / 3], [2 / 3], [1.0]]) * (r.q - q_prev)
+        hits = [h for h in self.checker.check(samples) if h is not None]
+        if hits:
+            return None, hits[0], avoided
         return r, "", avoided
 
     def _walk(
@@ -157,12 +176,15 @@ class PathFollower:
         axes: ArrayLike,
         surface_points: ArrayLike,
         q_start: ArrayLike,
-    ) -> PathSolution:
+        *,
+        max_failures: int | None = None,
+    ) -> PathSolution | None:
         """Solve every set-point in order, starting from joints ``q_start`` (7,).
 
         ``tips`` (N, 3) torch tip positions, ``axes`` (N, 3) unit torch axes along the jet
         (into the surface), ``surface_points`` (N, 3) where the jet meets the surface; all
-        metres, base frame.
+        metres, base frame. None when more than ``max_failures`` set-points fail (a start that
+        cannot beat another's).
         """
         P = np.asarray(tips, dtype=np.float64)
         A = np.asarray(axes, dtype=np.float64)
@@ -177,27 +199,42 @@ class PathFollower:
         q_prev = np.asarray(q_start, dtype=np.float64)
         gap = 1
         avoided = 0
-        started = False  # before the first solution nothing constrains the joint step
+        # Continuity is asked of neighbours in one cut only: before the first solution, and
+        # after a set-point that failed (the cut stops there), any posture will do.
+        started = False
+        failures = 0
+        breaks: list[int] = []
         for i in range(n):
-            allowed = st.max_joint_step_rad * gap if started else np.inf
+            allowed = st.max_joint_step_rad if started and gap == 1 else np.inf
             r, why, av = self._try(P[i], A[i], q_prev, allowed)
             avoided += av
             if r is not None:
                 q_out[i], status[i] = r.q, REACHED
             else:
-                found = self._tilted(P[i], A[i], S[i], q_prev, allowed)
+                prefer = axis_out[i - 1] if i > 0 and status[i - 1] == TILTED else None
+                found = self._tilted(P[i], A[i], S[i], q_prev, allowed, prefer=prefer)
+                if found is None and why == "flip":
+                    # Reachable, but only in another posture: no flip mid-cut; the cut stops
+                    # before this set-point and starts again here.
+                    r, why, _ = self._try(P[i], A[i], q_prev, np.inf, walk=False)
                 if found is not None:
                     r, tip_out[i], axis_out[i], tilt[i] = found
                     q_out[i], status[i] = r.q, TILTED
+                elif r is not None:
+                    q_out[i], status[i] = r.q, REACHED
+                    breaks.append(i)
                 else:
-                    collision = why.endswith("/surface") or why.endswith("/floor")
+                    collision = why.endswith(("/surface", "/unseen", "/floor"))
                     status[i] = COLLISION if collision else UNREACHABLE
                     reason[i] = why
+                    failures += 1
+                    if max_failures is not None and failures > max_failures:
+                        return None
             if r is not None:
                 q_prev, gap, started = r.q, 1, True
             else:
                 gap += 1
-        sol = PathSolution(q_out, status, reason, tip_out, axis_out, tilt, avoided)
+        sol = PathSolution(q_out, status, reason, tip_out, axis_out, tilt, avoided, breaks=breaks)
         sol.score = self._score(sol)
         return sol
 
@@ -208,7 +245,15 @@ class PathFollower:
         surface: FloatArray,
         q_prev: FloatArray,
         allowed: float,
+        *,
+        prefer: FloatArray | None = None,
     ) -> tuple[IkResult, FloatArray, FloatArray, float] | None:
+        """The smallest tilt that works; among one tilt's directions the smallest joint step.
+
+        ``prefer``: the previous set-point's tilted axis. Its direction is tried first at each
+        tilt and taken when it works (a run of tilted set-points keeps its lean, and costs one
+        solve per set-point); only if it never does are all directions searched.
+        """
         st = self.settings
         if st.max_tilt_deg <= 0 or st.tilt_steps <= 0 or st.tilt_directions <= 0:
             return None
@@ -216,12 +261,27 @@ class PathFollower:
         u = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
         u /= np.linalg.norm(u)
         w = np.cross(axis, u)
-        for theta in np.radians(st.max_tilt_deg) * np.arange(1, st.tilt_steps + 1) / st.tilt_steps:
+        thetas = np.radians(st.max_tilt_deg) * np.arange(1, st.tilt_steps + 1) / st.tilt_steps
+        phis = 2 * np.pi * np.arange(st.tilt_directions) / st.tilt_directions
+
+        def candidate(theta: float, phi: float) -> tuple[IkResult | None, FloatArray, FloatArray]:
+            a = np.cos(theta) * axis + np.sin(theta) * (np.cos(phi) * u + np.sin(phi) * w)
+            t = surface - standoff * a
+            r, _, _ = self._try(t, a, q_prev, allowed, max_iterations=TILT_ITERATIONS, walk=False)
+            return r, t, a
+
+        if prefer is not None:
+            lean = prefer - np.dot(prefer, axis) * axis
+            if float(np.linalg.norm(lean)) > 1e-9:
+                phi0 = float(np.arctan2(np.dot(lean, w), np.dot(lean, u)))
+                for theta in thetas:
+                    r, t, a = candidate(float(theta), phi0)
+                    if r is not None:
+                        return r, t, a, float(theta)
+        for theta in thetas:
             best: tuple[float, IkResult, FloatArray, FloatArray] | None = None
-            for phi in 2 * np.pi * np.arange(st.tilt_directions) / st.tilt_directions:
-                a = np.cos(theta) * axis + np.sin(theta) * (np.cos(phi) * u + np.sin(phi) * w)
-                t = surface - standoff * a
-                r, _, _ = self._try(t, a, q_prev, allowed, max_iterations=TILT_ITERATIONS)
+            for phi in phis:
+                r, t, a = candidate(float(theta), float(phi))
                 if r is None:
                     continue
                 step = float(np.max(np.abs(r.q - q_prev)))
@@ -232,13 +292,15 @@ class PathFollower:
         return None
 
     def _score(self, sol: PathSolution) -> tuple[float, ...]:
-        """Larger is better: set-points passed, fewer tilts, then the worst joint margin."""
+        """Larger is better: set-points passed, fewer cuts (breaks), fewer tilts, then the worst
+        joint margin."""
         ok = sol.ok
         margin = 0.0
         if ok.any():
             q = sol.q[ok]
             margin = float(np.min(np.minimum(q - self.ik.lower, self.ik.upper - q)))
-        return (float(ok.sum()), -float(sum(s == TILTED for s in sol.status)), margin)
+        tilts = float(sum(s == TILTED for s in sol.status))
+        return (float(ok.sum()), -float(len(sol.breaks)), -tilts, margin)
 
     # ------------------------------------------------------------------ the start
 
@@ -282,7 +344,11 @@ class PathFollower:
         for q0 in itertools.chain(self.start_candidates(P[0], A[0]), [base]):
             if best is not None and q0 is base:
                 break  # the fallback only when no start converged
-            sol = self.follow(P, A, surface_points, q0)
+            # A start that fails as often as the best so far cannot pass more set-points.
+            limit = None if best is None else int(len(P) - best.score[0]) - 1
+            sol = self.follow(P, A, surface_points, q0, max_failures=limit)
+            if sol is None:
+                continue  # more failures than the best so far: it cannot win
             if best is None or sol.score > best.score:
                 best = sol
             if not any(_posture_dependent(r) for r in best.reason):

@@ -200,8 +200,13 @@ class TorchIk:
         it = 0
         dp = da = np.inf
         evaluated = False  # dp, da belong to the current q
+        grad: FloatArray | None = None
         for it in range(1, limit + posture_iterations + 1):
-            e, J, dp, da, grad = self._task(q, p_star, a_star, gradient=True)
+            # The manipulability gradient costs as much as the rest of an iteration; within one
+            # solve's small steps it changes little, so it is refreshed every few iterations.
+            fresh = grad is None or it % 4 == 0 or extra < posture_iterations
+            e, J, dp, da, g = self._task(q, p_star, a_star, gradient=fresh)
+            grad = g if g is not None else grad
             evaluated = True
             score = dp + ROTATION_LENGTH_M * da
             if score < best[0] - 1e-9:

@@ -54,7 +54,7 @@ from scrapcut_cli.toolpath.path import CuttingPath
 FloatArray = NDArray[np.float64]
 
 #: Point phases.
-PHASES = ("approach", "pierce", "preheat", "cut", "run_out", "retreat")
+PHASES = ("approach", "pierce", "preheat", "cut", "run_out", "retreat", "transit")
 
 
 @dataclass(frozen=True)
@@ -141,6 +141,7 @@ def plan_trajectory(
     surface_base: ArrayLike | None,
     mount: TorchMount,
     config: MotionConfig | None = None,
+    unseen_base: ArrayLike | None = None,
     kin: PandaKinematics | None = None,
     collision_min_points: int = 3,
 ) -> Trajectory:
@@ -153,6 +154,9 @@ def plan_trajectory(
         ``info`` (the path summary) says how the cut starts and finishes.
     surface_base : (M, 3) float64, metres, base frame, optional
         The observed surface the arm and torch must clear (None: the floor only).
+    unseen_base : (K, 3) float64, metres, base frame, optional
+        Centres of the voxels near the piece the camera never saw (``motion.observed``),
+        avoided as well.
     mount : TorchMount
         ``T_flange_tool`` and the torch body.
     config : MotionConfig
@@ -183,6 +187,7 @@ def plan_trajectory(
             min_points=collision_min_points,
             voxel_m=cfg.collision_voxel_m,
         ),
+        unseen_base=unseen_base,
     )
     follower = PathFollower(
         ik,
@@ -207,105 +212,52 @@ def plan_trajectory(
             f"({', '.join(f'{k}: {v}' for k, v in reasons.most_common())})"
         )
 
-    # 2. run-out, approach, retreat
-    first, last = int(ok[0]), int(ok[-1])
-    q_first, q_last = solution.q[first], solution.q[last]
-    run_out_q = np.zeros((0, 7))
-    run_out_s = np.zeros(0)
-    if ends.finish == "run_out" and cfg.run_out_m > 0:
-        tangent = _end_tangent(path.surface_points, solution.axis[last])
-        if tangent is not None:
-            run_out_q, run_out_s = _line_waypoints(
-                follower,
-                solution.tip[last],
-                tangent,
-                solution.axis[last],
-                q_last,
-                cfg.run_out_m,
-                cfg.waypoint_spacing_m,
-            )
-    q_end = run_out_q[-1] if len(run_out_q) else q_last
-    T_end = ik.tool_poses(q_end)[0]
-    approach_q, approach_s = _line_waypoints(
-        follower,
-        solution.tip[first],
-        -solution.axis[first],
-        solution.axis[first],
-        q_first,
-        cfg.approach_m,
-        cfg.waypoint_spacing_m,
-    )
-    retreat_q, retreat_s = _line_waypoints(
-        follower,
-        T_end[:3, 3],
-        -T_end[:3, 2],
-        T_end[:3, 2],
-        q_end,
-        cfg.retreat_m,
-        cfg.waypoint_spacing_m,
-    )
-
-    # 3. timing
+    # 2.-3. one cut per run of consecutive reachable set-points: approach, dwell, cut (and the
+    # run-out past a far edge), retreat; a transit in joint space between runs. The torch never
+    # cuts across set-points it cannot reach: it retreats and pierces again after them.
     plan_limits = limits.scaled(cfg.limit_share)
     profile = MoveProfile(cfg.accel_time_s, cfg.jerk_time_s)
+    cuts = np.flatnonzero((np.diff(ok) > 1) | np.isin(ok[1:], solution.breaks)) + 1
+    runs = np.split(ok, cuts)
     segments: list[_Segment] = []
     scales: dict[str, float] = {}
-    dwell_phase = "preheat" if ends.start == "edge" else "pierce"
-    if len(approach_q):
-        knots_q = np.vstack([approach_q[::-1], q_first])
-        knots_s = np.concatenate([[0.0], approach_s[-1] - approach_s[::-1][1:], [approach_s[-1]]])
-        move = time_move(
-            knots_q,
-            knots_s,
-            np.full(len(knots_s) - 1, cfg.travel_speed_m_s),
+    lengths = {"approach_m": np.inf, "retreat_m": np.inf, "run_out_m": 0.0}
+    raw = path.info.get("pierce_s")
+    pierce_s = float(raw) if isinstance(raw, int | float) and raw > 0 else float(path.time[0])
+    transit_hits = 0
+    q_prev_end: FloatArray | None = None
+    cut_move: TimedMove | None = None
+    for k, run in enumerate(runs):
+        edge_start = ends.start == "edge" and int(run[0]) == 0
+        run_out = ends.finish == "run_out" and int(run[-1]) == len(path) - 1
+        parts, run_info = _plan_run(
+            path,
+            solution,
+            run,
+            follower,
+            ik,
+            cfg,
             plan_limits,
-            profile=profile,
+            profile,
+            dwell_s=float(path.time[0]) if edge_start or k == 0 else pierce_s,
+            dwell_phase="preheat" if edge_start else "pierce",
+            run_out=run_out,
         )
-        scales["approach"] = move.time_scale
-        seg = _sample(move, cfg.sample_period_s, "approach")
-        seg.setpoint[-1] = first
-        seg.phase[-1] = dwell_phase  # arrived: the dwell starts
-        segments.append(seg)
+        if q_prev_end is not None:
+            transit, hits_in_transit = _transit(
+                q_prev_end, parts[0].q[0], checker, cfg, plan_limits, profile
+            )
+            transit_hits += hits_in_transit
+            segments.append(transit)
+        segments.extend(parts)
+        q_prev_end = parts[-1].q[-1]
+        for name, value in run_info["scales"].items():
+            scales[name] = max(scales.get(name, 1.0), value)
+        lengths["approach_m"] = min(lengths["approach_m"], run_info["approach_m"])
+        lengths["retreat_m"] = min(lengths["retreat_m"], run_info["retreat_m"])
+        lengths["run_out_m"] = max(lengths["run_out_m"], run_info["run_out_m"])
+        cut_move = run_info["cut_move"] or cut_move
     dwell = float(path.time[0])
-    segments.append(
-        _Segment(
-            np.array([0.0, dwell]) if dwell > 0 else np.array([0.0]),
-            np.tile(q_first, (2 if dwell > 0 else 1, 1)),
-            np.zeros((2 if dwell > 0 else 1, 7)),
-            np.zeros((2 if dwell > 0 else 1, 7)),
-            np.full(2 if dwell > 0 else 1, first, dtype=np.int64),
-            [dwell_phase] * (2 if dwell > 0 else 1),
-        )
-    )
-    cut_move = None
-    cut_q = np.vstack([solution.q[ok], run_out_q])
-    if len(cut_q) >= 2:
-        arc = path.arc_length[ok] - path.arc_length[first]
-        times = path.time[ok]
-        speeds = np.diff(arc) / np.maximum(np.diff(times), 1e-9)
-        end_speed = float(path.speed[last])
-        cut_s = np.concatenate([arc, arc[-1] + run_out_s])
-        cut_speeds = np.concatenate([speeds, np.full(len(run_out_s), end_speed)])
-        cut_move = time_move(cut_q, cut_s, cut_speeds, plan_limits, profile=profile)
-        scales["cut"] = cut_move.time_scale
-        seg = _sample(cut_move, cfg.sample_period_s, "cut")
-        knot_t = cut_move.knot_times()
-        index = np.concatenate([ok, np.full(len(run_out_s), -1)])
-        phases = ["cut"] * len(ok) + ["run_out"] * len(run_out_s)
-        seg = _with_knots(seg, cut_move, knot_t, index, phases)
-        segments.append(seg)
-    if len(retreat_q):
-        knots_q = np.vstack([q_end, retreat_q])
-        knots_s = np.concatenate([[0.0], retreat_s])
-        move = time_move(
-            knots_q,
-            knots_s,
-            np.full(len(knots_s) - 1, cfg.travel_speed_m_s),
-            plan_limits,
-            profile=profile,
-        )
-        scales["retreat"] = move.time_scale
-        segments.append(_sample(move, cfg.sample_period_s, "retreat"))
 
     # 4. one time line
     t, q, qd, qdd, sp, phase = _concatenate(segments)
@@ -326,11 +278,9 @@ def plan_trajectory(
         dwell=dwell,
         scales=scales,
         cut_move=cut_move,
-        lengths={
-            "approach_m": float(approach_s[-1]) if len(approach_s) else 0.0,
-            "retreat_m": float(retreat_s[-1]) if len(retreat_s) else 0.0,
-            "run_out_m": float(run_out_s[-1]) if len(run_out_s) else 0.0,
-        },
+        lengths={k: float(v) for k, v in lengths.items()},
+        cut_segments=len(runs),
+        transit_hits=transit_hits,
         checker=checker,
         limits=limits,
         limit_share=cfg.limit_share,
@@ -352,6 +302,151 @@ def plan_trajectory(
 
 
 # --------------------------------------------------------------------------- pieces
+
+
+def _plan_run(
+    path: CuttingPath,
+    sol: PathSolution,
+    run: NDArray[np.intp],
+    follower: PathFollower,
+    ik: TorchIk,
+    cfg: MotionConfig,
+    plan_limits: JointLimits,
+    profile: MoveProfile,
+    *,
+    dwell_s: float,
+    dwell_phase: str,
+    run_out: bool,
+) -> tuple[list[_Segment], dict[str, Any]]:
+    """Approach, dwell, cut (+ run-out), retreat of one run of consecutive set-points."""
+    first, last = int(run[0]), int(run[-1])
+    q_first, q_last = sol.q[first], sol.q[last]
+    run_out_q, run_out_s = np.zeros((0, 7)), np.zeros(0)
+    if run_out and cfg.run_out_m > 0:
+        tangent = _end_tangent(path.surface_points, sol.axis[last])
+        if tangent is not None:
+            run_out_q, run_out_s = _line_waypoints(
+                follower,
+                sol.tip[last],
+                tangent,
+                sol.axis[last],
+                q_last,
+                cfg.run_out_m,
+                cfg.waypoint_spacing_m,
+            )
+    q_end = run_out_q[-1] if len(run_out_q) else q_last
+    T_end = ik.tool_poses(q_end)[0]
+    approach_q, approach_s = _line_waypoints(
+        follower,
+        sol.tip[first],
+        -sol.axis[first],
+        sol.axis[first],
+        q_first,
+        cfg.approach_m,
+        cfg.waypoint_spacing_m,
+    )
+    retreat_q, retreat_s = _line_waypoints(
+        follower,
+        T_end[:3, 3],
+        -T_end[:3, 2],
+        T_end[:3, 2],
+        q_end,
+        cfg.retreat_m,
+        cfg.waypoint_spacing_m,
+    )
+    parts: list[_Segment] = []
+    scales: dict[str, float] = {}
+
+    def travel(knots_q: FloatArray, knots_s: FloatArray, phase: str) -> _Segment:
+        move = time_move(
+            knots_q,
+            knots_s,
+            np.full(len(knots_s) - 1, cfg.travel_speed_m_s),
+            plan_limits,
+            profile=profile,
+        )
+        scales[phase] = move.time_scale
+        return _sample(move, cfg.sample_period_s, phase)
+
+    if len(approach_q):
+        knots_s = np.concatenate([[0.0], approach_s[-1] - approach_s[::-1][1:], [approach_s[-1]]])
+        seg = travel(np.vstack([approach_q[::-1], q_first]), knots_s, "approach")
+        seg.setpoint[-1] = first
+        seg.phase[-1] = dwell_phase  # arrived: the dwell starts
+        parts.append(seg)
+    n_dwell = 2 if dwell_s > 0 else 1
+    parts.append(
+        _Segment(
+            np.array([0.0, dwell_s])[:n_dwell],
+            np.tile(q_first, (n_dwell, 1)),
+            np.zeros((n_dwell, 7)),
+            np.zeros((n_dwell, 7)),
+            np.full(n_dwell, first, dtype=np.int64),
+            [dwell_phase] * n_dwell,
+        )
+    )
+    cut_move = None
+    cut_q = np.vstack([sol.q[run], run_out_q])
+    if len(cut_q) >= 2:
+        arc = path.arc_length[run] - path.arc_length[first]
+        speeds = np.diff(arc) / np.maximum(np.diff(path.time[run]), 1e-9)
+        cut_s = np.concatenate([arc, arc[-1] + run_out_s])
+        cut_speeds = np.concatenate([speeds, np.full(len(run_out_s), float(path.speed[last]))])
+        cut_move = time_move(cut_q, cut_s, cut_speeds, plan_limits, profile=profile)
+        scales["cut"] = cut_move.time_scale
+        seg = _sample(cut_move, cfg.sample_period_s, "cut")
+        index = np.concatenate([run, np.full(len(run_out_s), -1)])
+        phases = ["cut"] * len(run) + ["run_out"] * len(run_out_s)
+        parts.append(_with_knots(seg, cut_move, cut_move.knot_times(), index, phases))
+    if len(retreat_q):
+        parts.append(
+            travel(np.vstack([q_end, retreat_q]), np.concatenate([[0.0], retreat_s]), "retreat")
+        )
+    info = {
+        "scales": scales,
+        "cut_move": cut_move,
+        "approach_m": float(approach_s[-1]) if len(approach_s) else 0.0,
+        "retreat_m": float(retreat_s[-1]) if len(retreat_s) else 0.0,
+        "run_out_m": float(run_out_s[-1]) if len(run_out_s) else 0.0,
+    }
+    return parts, info
+
+
+#: Joint-space step of the collision check along a transit between cuts, radians.
+_TRANSIT_CHECK_RAD = 0.02
+
+
+def _transit(
+    q_from: FloatArray,
+    q_to: FloatArray,
+    checker: CollisionChecker,
+    cfg: MotionConfig,
+    plan_limits: JointLimits,
+    profile: MoveProfile,
+) -> tuple[_Segment, int]:
+    """A straight joint-space move between two cuts, and how many of its checked samples
+    collide (with the observed surface or the floor)."""
+    distance = float(np.max(np.abs(q_to - q_from)))
+    if distance < 1e-9:
+        return _Segment(
+            np.array([0.0]),
+            q_from[None],
+            np.zeros((1, 7)),
+            np.zeros((1, 7)),
+            np.full(1, -1, dtype=np.int64),
+            ["transit"],
+        ), 0
+    n = max(int(np.ceil(distance / _TRANSIT_CHECK_RAD)), 1)
+    samples = q_from + np.linspace(0.0, 1.0, n + 1)[:, None] * (q_to - q_from)
+    hits = sum(h is not None for h in checker.check(samples))
+    move = time_move(
+        np.vstack([q_from, q_to]),
+        np.array([0.0, distance]),
+        np.array([cfg.transit_speed_rad_s]),
+        plan_limits,
+        profile=profile,
+    )
+    return _sample(move, cfg.sample_period_s, "transit"), hits
 
 
 def _end_tangent(surface_points: FloatArray, axis: FloatArray) -> FloatArray | None:
@@ -474,6 +569,8 @@ def _summary(
     checker: CollisionChecker,
     limits: JointLimits,
     limit_share: float,
+    cut_segments: int,
+    transit_hits: int,
 ) -> dict[str, Any]:
     n = len(path)
     ok = sol.ok
@@ -511,6 +608,7 @@ def _summary(
         "flagged": flagged,
         "max_tilt_used_deg": float(np.degrees(sol.tilt_rad.max())) if n else 0.0,
         "flips_avoided": int(sol.flips_avoided),
+        "posture_changes": list(sol.breaks),
         "start": ends.start,
         "finish": ends.finish,
         "dwell_s": dwell,
@@ -530,10 +628,13 @@ def _summary(
         "limits": "Franka datasheet (motion.limits)",
         "limit_share_planned": float(limit_share),
         "limits_ok": bool(check.ok),
-        "trajectory_collisions": len(colliding),
+        "cut_segments": cut_segments,
+        "transit_collision_samples": transit_hits,
+        "trajectory_collisions": len(colliding) + transit_hits,
         "trajectory_collision_bodies": dict(Counter(colliding).most_common()),
         "observed_points": len(checker.points),
+        "unseen_voxels": len(checker.unseen),
         "floor_z_m": float(checker.settings.floor_z_m),
-        "executable": bool(ok.all() and check.ok and not colliding),
+        "executable": bool(ok.all() and check.ok and not colliding and not transit_hits),
         "planning_share_default": PLANNING_SHARE,
     }

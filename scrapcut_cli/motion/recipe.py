@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from scrapcut_cli.config import MotionConfig, PerceptionConfig, ScrapcutConfig
+from scrapcut_cli.config import MotionConfig, ScrapcutConfig
 from scrapcut_cli.errors import MotionError
 from scrapcut_cli.geometry import (
     matrix_to_quat_xyzw,
@@ -35,6 +35,7 @@ from scrapcut_cli.geometry import (
     transform_points,
 )
 from scrapcut_cli.motion.limits import panda_limits
+from scrapcut_cli.motion.observed import observe
 from scrapcut_cli.motion.panda import PandaKinematics
 from scrapcut_cli.motion.plan import Trajectory, plan_trajectory
 from scrapcut_cli.motion.tool import TorchMount, default_mount, parse_tool_offset
@@ -46,34 +47,6 @@ FloatArray = NDArray[np.float64]
 
 #: The URDF's base link: the frame joint trajectories are planned in.
 ROBOT_BASE = "panda_link0"
-#: Nearest depth the observed-surface sampling is laid out for (a scan at 0.2–0.45 m).
-_NEAR_M = 0.25
-
-
-def observed_surface(
-    frames: Iterable[Frame], *, voxel_m: float, perception: PerceptionConfig
-) -> FloatArray:
-    """Every surface the camera saw: (N, 3) float64, metres, base frame, one point per voxel.
-
-    Depth pixels on a grid of about two samples per voxel at scanning distance, gated like the
-    paint (depth range, flying pixels: ``perception``), back-projected with each frame's pose.
-    """
-    from scrapcut_cli.exploration.occupancy import depth_points
-    from scrapcut_cli.geometry import pack_voxel_keys, unpack_voxel_keys, voxel_keys
-
-    keys = np.zeros(0, dtype=np.int64)
-    for frame in frames:
-        pts = depth_points(
-            frame,
-            voxel_size_m=voxel_m,
-            near_m=_NEAR_M,
-            min_depth_m=perception.min_depth_m,
-            max_depth_m=perception.max_depth_m,
-            flying_pixel_ratio=perception.flying_pixel_ratio,
-        )
-        if len(pts):
-            keys = np.union1d(keys, pack_voxel_keys(voxel_keys(pts, voxel_m)))
-    return np.asarray((unpack_voxel_keys(keys) + 0.5) * voxel_m, dtype=np.float64)
 
 
 @dataclass(frozen=True, eq=False)
@@ -142,6 +115,7 @@ def trajectory_from_files(
     rec_path, rec_how = _find_recording(path_file, meta, recording)
 
     surface: FloatArray | None = None
+    unseen: FloatArray | None = None
     T_base_path = np.eye(4)
     base_note = "path frame is the URDF base"
     source: dict[str, Any] = {
@@ -165,9 +139,15 @@ def trajectory_from_files(
                         progress(k, total)
                     yield frame
 
-            surface = observed_surface(
-                frames(), voxel_m=cfg.motion.collision_voxel_m, perception=cfg.perception
+            scene = observe(
+                frames(),
+                surface_voxel_m=cfg.motion.collision_voxel_m,
+                free_voxel_m=cfg.motion.unseen_voxel_m,
+                perception=cfg.perception,
+                floor_z_m=cfg.motion.floor_z_m,
             )
+            surface = scene.surface
+            unseen = scene.unseen if cfg.motion.avoid_unseen else None
             if frame_id != ROBOT_BASE and rec.tf.has_frame(ROBOT_BASE):
                 T_base_path = rec.tf.lookup_one(ROBOT_BASE, frame_id, rec.start_ns)
                 base_note = f"path frame moved into {ROBOT_BASE} with the recording's TF"
@@ -182,6 +162,8 @@ def trajectory_from_files(
         path = _moved(path, T_base_path)
         if surface is not None:
             surface = transform_points(T_base_path, surface)
+        if unseen is not None:
+            unseen = transform_points(T_base_path, unseen)
     tp = meta.get("config", {}).get("toolpath", {}) if isinstance(meta.get("config"), dict) else {}
     min_points = int(tp.get("collision_min_points", 3)) if isinstance(tp, dict) else 3
     traj = plan_trajectory(
@@ -192,6 +174,7 @@ def trajectory_from_files(
         config=cfg.motion,
         kin=kin,
         collision_min_points=min_points,
+        unseen_base=unseen,
     )
     traj.summary["observed_surface"] = rec_how if surface is not None else "none"
     traj.summary["robot_base"] = base_note

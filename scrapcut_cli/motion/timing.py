@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.interpolate import CubicSpline
+from scipy.interpolate import CubicSpline, PchipInterpolator
 
 from scrapcut_cli.motion.limits import JointLimits
 
@@ -119,7 +119,7 @@ def time_move(
     s_k = np.asarray(s_knots, dtype=np.float64)
     v_k = np.asarray(speeds, dtype=np.float64)
     prof = profile or MoveProfile()
-    spline = CubicSpline(s_k, q, axis=0, bc_type="natural")
+    spline = PchipInterpolator(s_k, q, axis=0)
     scale = 1.0
     for _ in range(6):
         t, s, sd, sdd = _speed_profile(s_k, v_k / scale, prof, scale)

@@ -9,8 +9,9 @@ motor forces) on the URDF's Panda under gravity. What the arm actually did is me
 - the torch tip's deviation from every set-point it passes (position and axis angle), from
   the simulated joint angles through the torch mount ``T_flange_tool``;
 - how close each joint came to its limits;
-- collisions (``check_period_s``) of the arm's links and a torch model (a cylinder from the
-  flange to the tip, the trajectory's torch radius) with the piece's TRUE mesh and the floor,
+- collisions (``check_period_s``) of the arm's links and the torch (the planner's model: a
+  capsule of the trajectory's torch radius and length ending at the nozzle tip, then a holder
+  to the flange) with the piece's TRUE mesh and the floor,
   in a second, kinematic pybullet world, when the recording came from the simulator (the piece
   is rebuilt from the recording's metadata). The planner never saw that mesh: it planned
   against the observed surface; this is the check of that plan against the truth.
@@ -30,6 +31,7 @@ from numpy.typing import NDArray
 from scrapcut_cli.geometry import matrix_to_quat_xyzw
 from scrapcut_cli.motion.panda import PandaKinematics, default_urdf_path
 from scrapcut_cli.motion.timing import quintic_hermite
+from scrapcut_cli.motion.tool import HOLDER_RADIUS_M
 from scrapcut_cli.sim._pybullet import pybullet, quiet_stdout
 from scrapcut_cli.sim.mesh import TriMesh
 
@@ -131,6 +133,7 @@ def simulate_cut(
     setpoint_axes: NDArray[np.float64],
     T_flange_tool: NDArray[np.float64],
     torch_radius_m: float,
+    torch_length_m: float = 0.15,
     piece: TriMesh | None = None,
     piece_name: str | None = None,
     floor_z_m: float = 0.0,
@@ -176,6 +179,7 @@ def simulate_cut(
             fine[k_check],
             T_flange_tool,
             torch_radius_m,
+            torch_length_m,
             piece,
             floor_z_m,
         )
@@ -261,6 +265,7 @@ def _check_collisions(
     times: FloatArray,
     T_flange_tool: FloatArray,
     torch_radius_m: float,
+    torch_length_m: float,
     piece: TriMesh | None,
     floor_z_m: float,
 ) -> tuple[list[dict[str, Any]], dict[str, float | None]]:
@@ -286,18 +291,7 @@ def _check_collisions(
             flags=p.GEOM_FORCE_CONCAVE_TRIMESH,
         )
         obstacles["piece"] = c.createMultiBody(baseMass=0, baseCollisionShapeIndex=shape)
-    tip = T_flange_tool[:3, 3]
-    length = float(np.linalg.norm(tip))
-    torch = c.createMultiBody(
-        baseMass=0,
-        baseCollisionShapeIndex=c.createCollisionShape(
-            p.GEOM_CYLINDER, radius=torch_radius_m, height=length
-        ),
-    )
-    # The torch cylinder runs from the flange to the tip, its centre half way.
-    T_flange_torch = np.eye(4)
-    T_flange_torch[:3, :3] = _z_to(tip / length)
-    T_flange_torch[:3, 3] = 0.5 * tip
+    tools = _torch_bodies(c, p, T_flange_tool, torch_radius_m, torch_length_m)
     kin = PandaKinematics()
     flanges = kin.flange(q)
     hits: dict[tuple[str, str], dict[str, Any]] = {}
@@ -305,19 +299,57 @@ def _check_collisions(
     for k in range(len(q)):
         for j, v in enumerate(q[k]):
             c.resetJointState(robot, j, float(v))
-        T = flanges[k] @ T_flange_torch
-        c.resetBasePositionAndOrientation(
-            torch, T[:3, 3].tolist(), matrix_to_quat_xyzw(T[:3, :3]).tolist()
-        )
+        for body_id, _, T_flange_body in tools:
+            T = flanges[k] @ T_flange_body
+            c.resetBasePositionAndOrientation(
+                body_id, T[:3, 3].tolist(), matrix_to_quat_xyzw(T[:3, :3]).tolist()
+            )
         for what, body in obstacles.items():
             for pt in c.getClosestPoints(robot, body, 0.0):
                 link = int(pt[3])
                 if link not in checked or (what == "floor" and names[link] in _NOT_VS_FLOOR):
                     continue
                 _record(hits, clearance, "arm", names[link], what, float(pt[8]), times[k])
-            for pt in c.getClosestPoints(torch, body, _CLEARANCE_M):
-                _record(hits, clearance, "torch", "torch", what, float(pt[8]), times[k])
+            for body_id, name, _ in tools:
+                for pt in c.getClosestPoints(body_id, body, _CLEARANCE_M):
+                    _record(hits, clearance, "torch", name, what, float(pt[8]), times[k])
     return list(hits.values()), clearance
+
+
+def _torch_bodies(
+    c: Any, p: Any, T_flange_tool: FloatArray, radius: float, length: float
+) -> list[tuple[int, str, FloatArray]]:
+    """The torch as the planner models it (``motion.collision``): a capsule of the body's
+    radius whose rounded end is the nozzle tip (nozzles taper), ``length`` long, then the
+    holder (a cylinder) back to the flange. (body id, name, T_flange_body) each."""
+    tip = T_flange_tool[:3, 3]
+    z = T_flange_tool[:3, 2]
+    out: list[tuple[int, str, FloatArray]] = []
+
+    def place(centre: FloatArray) -> FloatArray:
+        T = np.eye(4)
+        T[:3, :3] = _z_to(z)
+        T[:3, 3] = centre
+        return T
+
+    straight = max(length - radius, 1e-4)  # the capsule's cylinder, between its sphere centres
+    capsule = c.createCollisionShape(p.GEOM_CAPSULE, radius=radius, height=straight)
+    centre = tip - z * (radius + 0.5 * straight)
+    out.append(
+        (c.createMultiBody(baseMass=0, baseCollisionShapeIndex=capsule), "torch", place(centre))
+    )
+    back = tip - z * length
+    rest = float(np.dot(back, z))  # how far the holder runs on towards the flange
+    if rest > 1e-3:
+        holder = c.createCollisionShape(p.GEOM_CYLINDER, radius=HOLDER_RADIUS_M, height=rest)
+        out.append(
+            (
+                c.createMultiBody(baseMass=0, baseCollisionShapeIndex=holder),
+                "holder",
+                place(back - 0.5 * rest * z),
+            )
+        )
+    return out
 
 
 def _record(

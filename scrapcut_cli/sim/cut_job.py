@@ -72,7 +72,10 @@ def simulate_cut_files(
             return None
         return arr if arr.shape == traj.positions.shape and np.all(np.isfinite(arr)) else None
 
-    radius = float(traj.data.get("tool", {}).get("body_radius_m", 0.012))
+    raw_tool = traj.data.get("tool")
+    tool: dict[str, Any] = raw_tool if isinstance(raw_tool, dict) else {}
+    radius = float(tool.get("body_radius_m", 0.012))
+    length = float(tool.get("body_length_m", 0.15))
     result = simulate_cut(
         traj.t,
         traj.positions,
@@ -83,6 +86,7 @@ def simulate_cut_files(
         setpoint_axes=traj.setpoint_axes,
         T_flange_tool=traj.T_flange_tool,
         torch_radius_m=radius,
+        torch_length_m=length,
         piece=None if piece is None else piece.mesh,
         piece_name=None if piece is None else piece.name,
         floor_z_m=floor_z_m,
