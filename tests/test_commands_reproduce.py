@@ -95,6 +95,12 @@ def test_reproduce_writes_every_output(small_run: tuple[Path, Result]) -> None:
     error = json.loads((out / "paths" / "cylinder_nurbs.error.json").read_text())
     assert error["mean_mm"] == rows[("cylinder", "nurbs")]["mean_mm"]
     assert "cores" in markdown  # the machine the figures were measured on
+    # What the Panda can execute of each path (scrapcut trajectory), per object and method.
+    assert "### What the Panda can execute" in markdown
+    for row in rows.values():
+        assert 0.0 <= row["panda_executable"] <= 1.0 and row["panda_setpoints"] > 0
+        assert row["panda_limits_ok"] is True
+    assert rows[("cylinder", "nurbs")]["panda_executable"] == 1.0
     # The table on screen carries the paper's figures beside ours.
     assert "paper" in result.stdout and "3.01" in result.stdout
     # config.toml is a valid --config and holds the resolution used.

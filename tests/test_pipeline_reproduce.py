@@ -129,6 +129,7 @@ def test_several_seeds_give_table1_with_intervals(
             engine=engine,
             plots=False,
             progress=lambda *p: progress.append(p),
+            motion=False,
         )
     assert [t.stem for t in planned] == [f"cylinder_nurbs_seed{s}" for s in (0, 1, 2)]
     assert [t.suffix for t in planned] == ["_seed0", "_seed1", "_seed2"]

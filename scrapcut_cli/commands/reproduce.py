@@ -98,6 +98,11 @@ def _names(values: tuple[str, ...]) -> list[str]:
 )
 @click.option("--no-plots", is_flag=True, help="Skip the PNG figures.")
 @click.option(
+    "--no-motion",
+    is_flag=True,
+    help="Skip planning the Panda's trajectory of each path (the report's execution table).",
+)
+@click.option(
     "--readme",
     type=click.Path(dir_okay=False, exists=True, path_type=Path),
     default=None,
@@ -135,6 +140,7 @@ def reproduce(
     retry_leaf_mm: float,
     leaf_sweep_mm: str,
     no_plots: bool,
+    no_motion: bool,
     readme: Path | None,
     readme_section: str,
     out_dir: Path,
@@ -201,6 +207,7 @@ def reproduce(
                 retry_leaf_size_m=retry_leaf_mm / 1000.0,
                 leaf_sweep_m=sweep,
                 plots=not no_plots,
+                motion=not no_motion,
                 progress=update,
                 command=" ".join(["scrapcut", *(shlex.quote(a) for a in sys.argv[1:])])
                 if sys.argv and Path(sys.argv[0]).name == "scrapcut"

@@ -35,7 +35,7 @@ from scrapcut_cli.geometry import (
     transform_points,
 )
 from scrapcut_cli.motion.limits import panda_limits
-from scrapcut_cli.motion.observed import observe
+from scrapcut_cli.motion.observed import ObservedScene, observe
 from scrapcut_cli.motion.panda import PandaKinematics
 from scrapcut_cli.motion.plan import Trajectory, plan_trajectory
 from scrapcut_cli.motion.tool import TorchMount, default_mount, parse_tool_offset
@@ -71,6 +71,43 @@ class TrajectoryResult:
             urdf=self.urdf,
             created=created,
         )
+
+
+def plan_for_scene(
+    path: CuttingPath,
+    *,
+    frame_id: str,
+    scene: ObservedScene,
+    config: ScrapcutConfig,
+    path_config: dict[str, Any] | None = None,
+) -> Trajectory:
+    """Plan ``path`` against an observed scene already built (``reproduce`` builds one per
+    scan for both methods): the torch body is ``path_config``'s (default ``config``'s)."""
+    settings = path_config if path_config is not None else config.to_dict()
+    return plan_trajectory(
+        path,
+        base_frame=frame_id,
+        surface_base=scene.surface,
+        unseen_base=scene.unseen if config.motion.avoid_unseen else None,
+        mount=resolve_mount(config.motion, settings),
+        config=config.motion,
+        kin=PandaKinematics(config.motion.urdf),
+        collision_min_points=config.toolpath.collision_min_points,
+    )
+
+
+def execution_figures(traj: Trajectory) -> dict[str, Any]:
+    """The report columns of what the Panda can execute (``reproduce``'s rows)."""
+    s = traj.summary
+    return {
+        "panda_executable": s["executable_share"],
+        "panda_setpoints": s["setpoints"],
+        "panda_tilted": s["tilted"],
+        "panda_unreachable": s["unreachable"],
+        "panda_in_collision": s["in_collision"],
+        "panda_cuts": s["cut_segments"],
+        "panda_limits_ok": s["limits_ok"],
+    }
 
 
 def resolve_mount(config: MotionConfig, path_config: dict[str, Any]) -> TorchMount:

@@ -59,11 +59,13 @@ from scrapcut_cli.evaluation.report import (
     render_interval_markdown,
     render_markdown,
     rows_to_records,
+    sort_rows,
 )
 from scrapcut_cli.pipeline.engine import Engine, TaskLost
 
 if TYPE_CHECKING:
-    from scrapcut_cli.pipeline.fit import StitchedRecording
+    from scrapcut_cli.motion.observed import ObservedScene
+    from scrapcut_cli.pipeline.fit import FitResult, StitchedRecording
     from scrapcut_cli.sim.recorder import RecordResult
 
 #: The paper's five simulated objects (Table I), and the real-robot shapes ``all`` adds.
@@ -109,6 +111,7 @@ class ScanTask:
     suffix: str = ""
     retry_leaf_size_m: float | None = 0.020
     leaf_sweep_m: tuple[float, ...] = ()
+    motion: bool = True  # plan the Panda's trajectory of every path (scrapcut trajectory)
 
     @property
     def key(self) -> str:
@@ -244,6 +247,7 @@ def reproduce(
     plots: bool = True,
     progress: ProgressFn | None = None,
     command: str = "scrapcut reproduce",
+    motion: bool = True,
 ) -> ReproduceResult:
     """Record, fit and evaluate every object with every method (and seed); write ``out_dir``.
 
@@ -287,6 +291,7 @@ def reproduce(
                 config=config,
                 retry_leaf_size_m=retry_leaf_size_m,
                 leaf_sweep_m=sweep,
+                motion=motion,
             )
             scans = _run_scans(engine, tasks, progress)
             runs = _object_runs(scans)
@@ -305,6 +310,7 @@ def reproduce(
                 "seed": seeds[0],
                 "width": config.sim.width,
                 "height": config.sim.height,
+                "motion": motion,
             }
             markdown, table = _write_reports(
                 tmp, runs, config=config, options=options, wall_time_s=wall, command=command
@@ -331,6 +337,7 @@ def plan_scans(
     config: ScrapcutConfig,
     retry_leaf_size_m: float | None,
     leaf_sweep_m: tuple[float, ...] = (),
+    motion: bool = True,
 ) -> list[ScanTask]:
     """One task per object, seed and scan: a sweep serves every method, exploration one each."""
     tasks = []
@@ -355,6 +362,7 @@ def plan_scans(
                         suffix=suffix,
                         retry_leaf_size_m=retry_leaf_size_m,
                         leaf_sweep_m=leaf_sweep_m,
+                        motion=motion,
                     )
                 )
     return tasks
@@ -441,12 +449,17 @@ def run_scan(task: ScanTask) -> ScanRun:
     summary["frames_used"] = stitched.source["frames_used"]
     summary["frames_skipped"] = stitched.source["frames_skipped"]
     summary["paint_points"] = stitched.stitch.size
+    scene = None
+    if task.motion:
+        t0 = time.perf_counter()
+        scene = _observed_scene(rec_path, config)
+        timings["observe"] = time.perf_counter() - t0
 
     rows = []
     for method in task.methods:
         t0 = time.perf_counter()
         rows.append(
-            _job_row(task, method, stitched, rec_path, config, task.retry_leaf_size_m, None)
+            _job_row(task, method, stitched, rec_path, config, task.retry_leaf_size_m, None, scene)
         )
         timings[f"fit_{method}"] = time.perf_counter() - t0
     sweep: list[ReportRow] = []
@@ -482,9 +495,11 @@ def _job_row(
     config: ScrapcutConfig,
     retry_leaf_size_m: float | None,
     stem: str | None,
+    scene: ObservedScene | None = None,
 ) -> ReportRow:
     """One pipeline job on the scan's stitched clouds, as a report row naming its path file
-    relative to the output folder (which is renamed at the end)."""
+    relative to the output folder (which is renamed at the end); with the observed ``scene``,
+    the row also says how much of the path the Panda can execute (``panda_*`` extras)."""
     from scrapcut_cli.pipeline.job import Job, run_job
 
     name = f"{stem or f'{task.object}_{method}'}{task.suffix}.json"
@@ -499,9 +514,36 @@ def _job_row(
     )
     result = run_job(job, stitched=stitched)
     row = result.row(task.object)
-    return replace(
-        row, source=f"paths/{name}" if result.ok else "", extras={**row.extras, "seed": task.seed}
-    )
+    extras = {**row.extras, "seed": task.seed}
+    if scene is not None and result.ok and result.fit is not None:
+        extras.update(_execution(result.fit, scene, result.config))
+    return replace(row, source=f"paths/{name}" if result.ok else "", extras=extras)
+
+
+def _observed_scene(rec_path: Path, config: ScrapcutConfig) -> ObservedScene:
+    """What the scan's camera saw (motion.observed), for the trajectories of its paths."""
+    from scrapcut_cli.motion.observed import observe
+    from scrapcut_cli.recording.reader import open_recording
+
+    with open_recording(rec_path, config.recording) as rec:
+        return observe(
+            rec.frames(),
+            surface_voxel_m=config.motion.collision_voxel_m,
+            free_voxel_m=config.motion.unseen_voxel_m,
+            perception=config.perception,
+            floor_z_m=config.motion.floor_z_m,
+        )
+
+
+def _execution(fit: FitResult, scene: ObservedScene, config: ScrapcutConfig) -> dict[str, Any]:
+    """The share of set-points the Panda can execute and why not (``scrapcut trajectory``)."""
+    from scrapcut_cli.motion.recipe import execution_figures, plan_for_scene
+
+    try:
+        traj = plan_for_scene(fit.path, frame_id=fit.frame_id, scene=scene, config=config)
+    except ScrapcutError as exc:
+        return {"panda_executable": 0.0, "panda_failure": str(exc)}
+    return execution_figures(traj)
 
 
 def _failed_scan(
@@ -625,7 +667,7 @@ def _write_reports(
     else:
         table = render_markdown(rows, paper=paper)
     section = "\n".join(about) + "\n" + table
-    body = table
+    body = table + _execution_markdown(rows)
     sweep_rows = [row for run in runs for row in run.sweep_rows]
     if sweep_rows:
         sweep = (
@@ -690,6 +732,36 @@ def _write_reports(
         json.dumps({"reproduce": options, "config": config.to_dict()}, indent=2) + "\n",
     )
     return markdown, section
+
+
+def _execution_markdown(rows: Sequence[ReportRow]) -> str:
+    """What the Panda can execute of each path (``scrapcut trajectory``), when planned."""
+    planned = [row for row in rows if "panda_executable" in row.extras]
+    if not planned:
+        return ""
+    lines = [
+        "",
+        "### What the Panda can execute",
+        "",
+        "Each path planned as `scrapcut trajectory` does (default torch mount, the scan's depth "
+        "as the observed surface, unseen space near the piece avoided).",
+        "",
+        "| Object | Method | Set-points | Executable | Tilted | Unreachable | In collision "
+        "| Cuts | Limits |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---|",
+    ]
+    for row in sort_rows(planned):
+        e = row.extras
+        if "panda_failure" in e:
+            lines.append(f"| {row.object} | {row.label} | | 0.0% | | | | | {e['panda_failure']} |")
+            continue
+        lines.append(
+            f"| {row.object} | {row.label} | {e['panda_setpoints']} | "
+            f"{100 * e['panda_executable']:.1f}% | {e['panda_tilted']} | "
+            f"{e['panda_unreachable']} | {e['panda_in_collision']} | {e['panda_cuts']} | "
+            f"{'ok' if e['panda_limits_ok'] else 'exceeded'} |"
+        )
+    return "\n".join(lines) + "\n"
 
 
 def _fmt(value: Any) -> str:
