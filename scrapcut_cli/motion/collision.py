@@ -30,7 +30,7 @@ from scrapcut_cli.motion.tool import HOLDER_RADIUS_M, TorchMount
 FloatArray = NDArray[np.float64]
 
 _S45 = float(np.sqrt(0.5))
-#: (link index 2..7, centre (3,), unit direction (3,), cylinder length, radius), link frames,
+#: (link index 2..8, centre (3,), unit direction (3,), cylinder length, radius), link frames,
 #: from franka_description's franka_arm.xacro (link7's geometry is turned 45° about z there).
 FRANKA_CAPSULES: tuple[tuple[int, tuple[float, ...], tuple[float, ...], float, float], ...] = (
     (2, (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.12, 0.06),
@@ -41,6 +41,9 @@ FRANKA_CAPSULES: tuple[tuple[int, tuple[float, ...], tuple[float, ...], float, f
     (6, (0.0, 0.0, -0.03), (0.0, 0.0, 1.0), 0.08, 0.05),
     (7, (0.0, 0.0, 0.01), (0.0, 0.0, 1.0), 0.14, 0.04),
     (7, (0.06 * _S45, 0.06 * _S45, 0.082), (_S45, _S45, 0.0), 0.01, 0.03),
+    # Not in Franka's self-collision model, which stops short of the flange: link 7's end and
+    # the flange (63 mm across, ISO 9409-1-31.5), as the robot's collision meshes have them.
+    (8, (0.0, 0.0, -0.015), (0.0, 0.0, 1.0), 0.03, 0.045),
 )
 #: Link index of the flange (panda_link8) in :meth:`PandaKinematics.link_frames`.
 FLANGE = 8
@@ -112,7 +115,7 @@ def sphere_cover(mount: TorchMount, settings: CollisionSettings) -> Spheres:
             c + 0.5 * length * d,
             radius,
             False,
-            f"panda_link{link}",
+            f"panda_link{min(link, 7)}",
         )
     T = mount.T_flange_tool
     tip, z = T[:3, 3], T[:3, 2]
