@@ -28,7 +28,7 @@ readme: $(STAMP)
 # The figures tests/test_commands_reproduce.py guards: Table I's fast configuration (160×120,
 # explore, seed 0), NURBS on two objects and the skeleton on two others. Run it when a change
 # improves them on purpose (or moves them within the test's margin) and commit the CSV.
-GUARD_OPTIONS := --width 160 --height 120 --leaf-sweep-mm none --no-plots --seeds 0
+GUARD_OPTIONS := --width 160 --height 120 --leaf-sweep-mm none --no-plots --no-motion --seeds 0
 guard-figures: $(STAMP)
 	rm -rf .guard && mkdir -p .guard
 	$(BIN)/scrapcut reproduce --objects cylinder,t_piece --methods nurbs $(GUARD_OPTIONS) -o .guard/nurbs

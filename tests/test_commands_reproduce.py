@@ -140,7 +140,7 @@ def test_unknown_method_is_one_line(tmp_path: Path) -> None:
 #: figures are guarded by the 320x240 fit tests).
 FAST = {"nurbs": "cylinder,t_piece", "skeleton": "i_beam,air_chamber"}
 FAST_OPTIONS = ("--width", 160, "--height", 120, "--leaf-sweep-mm", "none", "--no-plots",
-                "--seeds", 0, "--scheduler", "inline")  # fmt: skip
+                "--no-motion", "--seeds", 0, "--scheduler", "inline")  # fmt: skip
 #: A figure passes while within this factor of the committed one, plus this much: another CPU
 #: (different views after a float changes a planner decision) moves them by far less; a
 #: several-fold regression fails.
