@@ -297,3 +297,27 @@ def test_bad_trajectory_files_are_refused_with_the_key_named(
     write_trajectory_file(target, data)
     with pytest.raises(MotionError, match=message):
         read_trajectory_file(target)
+
+
+def test_the_move_between_two_cuts_goes_around_a_fin_between_them() -> None:
+    """A fin standing across the line splits the cut in two; the straight joint-space move
+    between the cuts would sweep the torch through it: the transit goes around (or over) it,
+    as Franka's DH forward kinematics of the sampled points confirms."""
+    path, cloud = _path(0.40, 0.60, (0.30, 0.70))
+    top = PLATE_Z + 0.2
+    fin = surface_patch((0.50, -0.1, PLATE_Z), (0.0, 0.2, 0.0), (0.0, 0.0, 0.2), spacing_m=0.004)
+    traj = _plan(path, np.vstack([cloud, fin]))
+    s = traj.summary
+    assert s["cut_segments"] == 2 and s["transits_around_obstacles"] == 1
+    assert s["trajectory_collisions"] == 0 and s["limits_ok"]
+    transit = np.flatnonzero(np.array(traj.phase) == "transit")
+    t = traj.t[transit[0] : transit[-1] + 1]
+    q = traj.positions[transit[0] : transit[-1] + 1]
+    fine = np.arange(t[0], t[-1], 0.005)
+    q_fine = np.column_stack([np.interp(fine, t, q[:, j]) for j in range(7)])
+    tips = _dh_tool(q_fine)[:, :3, 3]
+    cross = np.flatnonzero(np.diff(np.sign(tips[:, 0] - 0.50)) != 0)
+    assert len(cross) >= 1  # it does get to the other side
+    clear = ToolpathConfig().torch_radius_m
+    for i in cross:  # beside the fin's ends or above its top, never through it
+        assert abs(tips[i, 1]) > 0.1 + clear or tips[i, 2] > top + clear, tips[i]

@@ -18,6 +18,7 @@
 
 from __future__ import annotations
 
+import itertools
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
@@ -49,6 +50,7 @@ from scrapcut_cli.motion.timing import (
     time_move,
 )
 from scrapcut_cli.motion.tool import TorchMount
+from scrapcut_cli.motion.transit import TransitSettings, plan_transit, segment_samples
 from scrapcut_cli.toolpath.path import CuttingPath
 
 FloatArray = NDArray[np.float64]
@@ -225,6 +227,7 @@ def plan_trajectory(
     raw = path.info.get("pierce_s")
     pierce_s = float(raw) if isinstance(raw, int | float) and raw > 0 else float(path.time[0])
     transit_hits = 0
+    transits_searched = 0
     q_prev_end: FloatArray | None = None
     cut_move: TimedMove | None = None
     for k, run in enumerate(runs):
@@ -244,10 +247,11 @@ def plan_trajectory(
             run_out=run_out,
         )
         if q_prev_end is not None:
-            transit, hits_in_transit = _transit(
-                q_prev_end, parts[0].q[0], checker, cfg, plan_limits, profile
+            transit, hits_in_transit, searched = _transit(
+                q_prev_end, parts[0].q[0], checker, cfg, plan_limits, profile, seed=k
             )
             transit_hits += hits_in_transit
+            transits_searched += int(searched)
             segments.append(transit)
         segments.extend(parts)
         q_prev_end = parts[-1].q[-1]
@@ -281,6 +285,7 @@ def plan_trajectory(
         lengths={k: float(v) for k, v in lengths.items()},
         cut_segments=len(runs),
         transit_hits=transit_hits,
+        transits_searched=transits_searched,
         checker=checker,
         limits=limits,
         limit_share=cfg.limit_share,
@@ -412,8 +417,10 @@ def _plan_run(
     return parts, info
 
 
-#: Joint-space step of the collision check along a transit between cuts, radians.
-_TRANSIT_CHECK_RAD = 0.02
+#: Waypoint spacing (radians, largest joint) of a transit's joint path: the shape-preserving
+#: spline through collinear waypoints is the straight segment, so the timed move leaves the
+#: checked polyline only within one spacing of its corners (it is checked again, densely).
+_TRANSIT_KNOT_RAD = 0.05
 
 
 def _transit(
@@ -423,30 +430,60 @@ def _transit(
     cfg: MotionConfig,
     plan_limits: JointLimits,
     profile: MoveProfile,
-) -> tuple[_Segment, int]:
-    """A straight joint-space move between two cuts, and how many of its checked samples
-    collide (with the observed surface or the floor)."""
+    seed: int,
+) -> tuple[_Segment, int, bool]:
+    """A joint-space move between two cuts around the observed scene (:mod:`~.transit`: the
+    straight line when clear, else RRT-Connect seeded with ``seed``), the number of its
+    densely checked configurations that still collide (with the observed surface, the unseen
+    space or the floor), and whether a search was needed."""
     distance = float(np.max(np.abs(q_to - q_from)))
     if distance < 1e-9:
-        return _Segment(
-            np.array([0.0]),
-            q_from[None],
-            np.zeros((1, 7)),
-            np.zeros((1, 7)),
-            np.full(1, -1, dtype=np.int64),
-            ["transit"],
-        ), 0
-    n = max(int(np.ceil(distance / _TRANSIT_CHECK_RAD)), 1)
-    samples = q_from + np.linspace(0.0, 1.0, n + 1)[:, None] * (q_to - q_from)
-    hits = sum(h is not None for h in checker.check(samples))
+        return (
+            _Segment(
+                np.array([0.0]),
+                q_from[None],
+                np.zeros((1, 7)),
+                np.zeros((1, 7)),
+                np.full(1, -1, dtype=np.int64),
+                ["transit"],
+            ),
+            0,
+            False,
+        )
+
+    def collides(q: FloatArray) -> NDArray[np.bool_]:
+        return np.array([h is not None for h in checker.check(q)], dtype=bool)
+
+    settings = TransitSettings()
+    polyline = plan_transit(
+        q_from,
+        q_to,
+        collides,
+        plan_limits.lower,
+        plan_limits.upper,
+        np.random.default_rng(seed),
+        settings,
+    )
+    searched = polyline is not None and len(polyline) > 2
+    if polyline is None:  # no clear path found: the straight line, its collisions counted
+        polyline = np.vstack([q_from, q_to])
+    knots = np.vstack(
+        [polyline[0]]
+        + [segment_samples(a, b, _TRANSIT_KNOT_RAD)[1:] for a, b in itertools.pairwise(polyline)]
+    )
+    s_knots = np.concatenate([[0.0], np.cumsum(np.max(np.abs(np.diff(knots, axis=0)), axis=1))])
     move = time_move(
-        np.vstack([q_from, q_to]),
-        np.array([0.0, distance]),
-        np.array([cfg.transit_speed_rad_s]),
+        knots,
+        s_knots,
+        np.full(len(knots) - 1, cfg.transit_speed_rad_s),
         plan_limits,
         profile=profile,
     )
-    return _sample(move, cfg.sample_period_s, "transit"), hits
+    fine = np.linspace(
+        0.0, s_knots[-1], max(int(np.ceil(s_knots[-1] / settings.check_step_rad)), 1) + 1
+    )
+    hits = int(np.count_nonzero(collides(np.asarray(move.spline(fine)))))
+    return _sample(move, cfg.sample_period_s, "transit"), hits, searched
 
 
 def _end_tangent(surface_points: FloatArray, axis: FloatArray) -> FloatArray | None:
@@ -571,6 +608,7 @@ def _summary(
     limit_share: float,
     cut_segments: int,
     transit_hits: int,
+    transits_searched: int = 0,
 ) -> dict[str, Any]:
     n = len(path)
     ok = sol.ok
@@ -629,6 +667,7 @@ def _summary(
         "limit_share_planned": float(limit_share),
         "limits_ok": bool(check.ok),
         "cut_segments": cut_segments,
+        "transits_around_obstacles": transits_searched,
         "transit_collision_samples": transit_hits,
         "trajectory_collisions": len(colliding) + transit_hits,
         "trajectory_collision_bodies": dict(Counter(colliding).most_common()),
