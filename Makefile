@@ -43,8 +43,10 @@ lint: $(STAMP)
 	$(BIN)/ruff format --check .
 	$(BIN)/mypy scrapcut_cli
 
+# One pytest worker per core (pytest-xdist; a module's tests stay on one worker, so its
+# fixtures are built once); the slowest tests are listed at the end of every run.
 unit: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n auto --dist loadscope --durations=15
 
 test: lint unit
 
