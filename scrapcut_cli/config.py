@@ -567,6 +567,63 @@ class ToolpathConfig:
         "m",
         "half a 4 mm surface voxel at least; 0.2 m around a line is another part of the piece",
     )
+    # Closed loops (a ring, a cut-out): where the torch pierces ("top": the highest observed
+    # point; "reachable": the observed point nearest the robot's base; or "X,Y,Z" in metres,
+    # base frame: the loop's point nearest to it), the lead-in from the pierce onto the line
+    # and the overlap past the start at closure, so the loop is fully severed.
+    start: str = "top"
+    lead_in_m: float = rng(
+        0.005,
+        0.0,
+        0.1,
+        "m",
+        "0 pierces on the line; a lead-in over 100 mm cuts far into the piece",
+    )
+    overlap_m: float = rng(
+        0.01,
+        0.0,
+        0.2,
+        "m",
+        "0 stops where the cut began (a kerf's width can stay uncut); over 200 mm recuts the loop",
+    )
+
+
+@dataclass(frozen=True)
+class ClosureConfig:
+    """Whether the stitched paint closes on itself (``fitting.closure``) and its unobserved arcs.
+
+    ``mode``: "auto" decides from the paint and the observed surface; "open" and "closed"
+    force the answer (a worker who knows the mark is a ring).
+    """
+
+    mode: str = "auto"
+    # voxel of the centre chain the decision is made on
+    chain_voxel_m: float = rng(
+        0.01,
+        0.002,
+        0.1,
+        "m",
+        "under 2 mm the chain follows sensor noise; 100 mm is four strokes wide",
+    )
+    # an end's direction must lie this close to the chord to the other end (a circular gap of up
+    # to twice the angle) and run on into the other end when they lie side by side
+    max_end_angle_deg: float = rng(100.0, 0.0, 180.0, "deg", "an angle between directions")
+    # the gap may be at most this share of the loop
+    max_gap_share: float = rng(
+        0.5, 0.0, 0.9, "", "a share of the loop; closing over 90 % unseen is a guess, not a fit"
+    )
+    # how far past each tip the observed surface is probed for a real end
+    end_probe_m: float = rng(
+        0.025, 0.002, 0.2, "m", "under 2 mm probes one voxel; 200 mm reaches past most pieces"
+    )
+    # shorter stretches with neither paint nor surface are holes in the data, not arcs
+    min_unobserved_arc_m: float = rng(
+        0.01,
+        0.002,
+        1.0,
+        "m",
+        "under 2 mm is one bin along the curve; 1 m hides any arc of a scrap piece",
+    )
 
 
 @dataclass(frozen=True)
@@ -1013,6 +1070,7 @@ class ScrapcutConfig:
     stitch: StitchConfig = field(default_factory=StitchConfig)
     nurbs: NurbsConfig = field(default_factory=NurbsConfig)
     skeleton: SkeletonConfig = field(default_factory=SkeletonConfig)
+    closure: ClosureConfig = field(default_factory=ClosureConfig)
     toolpath: ToolpathConfig = field(default_factory=ToolpathConfig)
     exploration: ExplorationConfig = field(default_factory=ExplorationConfig)
     sim: SimConfig = field(default_factory=SimConfig)

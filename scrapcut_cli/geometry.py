@@ -173,6 +173,19 @@ def resample_polyline(points: ArrayLike, spacing: float) -> FloatArray:
     return interpolate_polyline(pts, np.linspace(0.0, total, n), cumulative=s)
 
 
+def closed_polyline(points: ArrayLike) -> FloatArray:
+    """A loop's vertices (N, 3) as a polyline that returns to its start: (N + 1, 3)."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    return np.asarray(np.vstack([pts, pts[:1]]))
+
+
+def resample_loop(points: ArrayLike, spacing: float) -> FloatArray:
+    """Evenly spaced points (M, 3) around a loop given by its vertices (N, 3) (the last joins the
+    first, which is not repeated), at most ``spacing`` metres apart; the first vertex is kept
+    and the first point is not repeated at the end."""
+    return resample_polyline(closed_polyline(points), spacing)[:-1]
+
+
 def interpolate_polyline(
     points: ArrayLike, arc_lengths: ArrayLike, *, cumulative: ArrayLike | None = None
 ) -> FloatArray:
@@ -197,6 +210,26 @@ def polyline_tangents(points: ArrayLike) -> FloatArray:
     n = np.linalg.norm(t, axis=1, keepdims=True)
     n[n == 0] = 1.0
     return np.asarray(t / n)
+
+
+def false_runs(mask: ArrayLike, *, closed: bool = False) -> list[tuple[int, int]]:
+    """Runs of False in a boolean sequence (N,) as (first, stop) index pairs, in order of their
+    first index; with ``closed`` the sequence is a loop and a run may wrap past its end
+    (stop <= first then, indices modulo N; an all-False loop is one run (0, N))."""
+    m = np.asarray(mask, dtype=bool).reshape(-1)
+    n = len(m)
+    if n == 0 or m.all():
+        return []
+    if not m.any():
+        return [(0, n)]
+    shift = int(np.flatnonzero(m)[0]) if closed else 0  # start on a True: no run is cut
+    step = np.diff(np.concatenate([[0], (~np.roll(m, -shift)).astype(np.int8), [0]]))
+    starts, stops = np.flatnonzero(step == 1), np.flatnonzero(step == -1)
+    runs = [
+        (int((a + shift) % n), int((b + shift - 1) % n + 1))
+        for a, b in zip(starts, stops, strict=True)
+    ]
+    return sorted(runs)
 
 
 #: (query, segment) pairs evaluated at once by :class:`PolylineDistance` (~100 MB of arrays);

@@ -120,7 +120,7 @@ class ObjectScan:
         self.reference = self.object.reference
         self.preset = noise_preset(noise)
         stroke = PaintStroke(
-            self.reference,
+            self.object.painted_line,  # a closed line's first point repeated: painted round
             width_m=0.025,
             rgb=PAINT_PRESETS["orange"].rgb,
             overspray=OVERSPRAY_PRESETS[self.preset.overspray],

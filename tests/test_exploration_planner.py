@@ -374,3 +374,35 @@ def test_slanted_ridge_is_crossed_by_looking_past_it(look_past: bool) -> None:
     else:
         assert not looked
         assert coverage < 0.75  # one face only: the paper's early stop
+
+
+# --------------------------------------------------------------------------- closed lines
+
+
+def _camera_above(z_m: float):  # type: ignore[no-untyped-def]
+    """A cell whose camera can go anywhere above ``z_m`` (none under a pipe, as an arm)."""
+    return reach_if(lambda T: float(T[2, 3]) > z_m)
+
+
+@pytest.mark.slow
+def test_a_cut_out_seen_all_round_stops_with_the_loop_closed() -> None:
+    scan = ObjectScan("plate_hole", width=160, height=120, start=0.0)
+    planner = ExplorationPlanner(scan.initial_view, reachable=REACH_ALL, hsv=ORANGE)
+    loop = explore(planner, scan)
+    assert planner.stop_reason == "loop_closed"
+    final = loop.final.info
+    assert final["loop"]["reason"] == "loop"
+    assert len(loop.frames) <= 12
+
+
+@pytest.mark.slow
+def test_a_ring_round_a_pipe_stops_at_the_arc_no_view_reaches() -> None:
+    scan = ObjectScan("pipe_ring", width=160, height=120, start=0.0)
+    planner = ExplorationPlanner(scan.initial_view, reachable=_camera_above(0.1), hsv=ORANGE)
+    loop = explore(planner, scan)
+    assert planner.stop_reason == "unobserved_arc"
+    final = loop.final.info
+    assert final["loop"]["reason"] == "unobserved_gap"
+    # Both directions ended where no view reached further.
+    assert [e["direction"] for e in planner.ends] == [0, 1]
+    assert 0.05 < final["loop"]["bridge_length_m"] < 0.25

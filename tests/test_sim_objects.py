@@ -14,7 +14,17 @@ from scrapcut_cli.sim import list_objects, make_object
 from scrapcut_cli.sim.mesh import TriMesh, box
 from scrapcut_cli.sim.surface import metal_albedo
 
-NAMES = ("cylinder", "i_beam", "t_piece", "basket", "air_chamber", "slanted", "planar_box")
+NAMES = (
+    "cylinder",
+    "i_beam",
+    "t_piece",
+    "basket",
+    "air_chamber",
+    "slanted",
+    "planar_box",
+    "pipe_ring",
+    "plate_hole",
+)
 
 
 def distance_to_mesh(mesh: TriMesh, points: np.ndarray) -> np.ndarray:
@@ -68,11 +78,22 @@ def test_reference_is_ordered_on_the_surface_and_in_reach(name: str) -> None:
     lo, hi = obj.vertices.min(axis=0), obj.vertices.max(axis=0)
     assert lo[2] == pytest.approx(0.0, abs=1e-9)
     assert lo[0] >= 0.25 and hi[0] <= 0.8 and np.abs([lo[1], hi[1]]).max() <= 0.35
-    # Normals: unit, and facing up or sideways (every line is seen from above).
+    # Normals: unit, and facing up or sideways (every line is seen from above), but for the
+    # ring round a pipe, whose underside faces the floor.
     n = obj.reference_normals
     assert n.shape == ref.shape
     assert np.allclose(np.linalg.norm(n, axis=1), 1.0)
-    assert n[:, 2].min() > -0.05
+    if name == "pipe_ring":
+        assert n[:, 2].min() < -0.99 and n[:, 2].max() > 0.99
+    else:
+        assert n[:, 2].min() > -0.05
+    # A closed line does not repeat its first point; its length includes the closing step.
+    assert obj.closed == (name in ("pipe_ring", "plate_hole"))
+    if obj.closed:
+        assert 1e-7 < np.linalg.norm(ref[-1] - ref[0]) < 0.0015
+        assert obj.reference_length_m == pytest.approx(
+            steps.sum() + np.linalg.norm(ref[-1] - ref[0])
+        )
 
 
 def test_cylinder_normals_are_radial() -> None:

@@ -24,6 +24,7 @@ from scrapcut_cli.commands._options import (
     stitch_options,
 )
 from scrapcut_cli.config import FitMethod, choice_names
+from scrapcut_cli.errors import ScrapcutError
 
 METHODS = choice_names(FitMethod)
 
@@ -141,6 +142,32 @@ METHODS = choice_names(FitMethod)
     help="Torch body radius for the collision check [mm] (default 12).",
 )
 @click.option(
+    "--closure",
+    type=click.Choice(["auto", "open", "closed"]),
+    default=None,
+    help="Is the line a loop (a ring, a cut-out)? auto (default): decided from the paint and "
+    "the surface seen around it; open or closed force it.",
+)
+@click.option(
+    "--start",
+    default=None,
+    metavar="top|reachable|X,Y,Z",
+    help="Where a loop's cut starts: top (default: the highest observed point), reachable "
+    "(the observed point nearest the robot's base) or X,Y,Z in metres, base frame.",
+)
+@click.option(
+    "--lead-in-mm",
+    type=config_type("toolpath.lead_in_m", 1e-3),
+    default=None,
+    help="A loop's lead-in from the pierce onto the line [mm] (default 5).",
+)
+@click.option(
+    "--overlap-mm",
+    type=config_type("toolpath.overlap_m", 1e-3),
+    default=None,
+    help="How far a loop's cut runs past its start, so the ring is severed [mm] (default 10).",
+)
+@click.option(
     "--speed-table",
     type=click.Path(dir_okay=False, path_type=Path),
     default=None,
@@ -180,6 +207,10 @@ def fit(
     max_tilt_deg: float | None,
     torch_length_mm: float | None,
     torch_radius_mm: float | None,
+    closure: str | None,
+    start: str | None,
+    lead_in_mm: float | None,
+    overlap_mm: float | None,
     speed_table: Path | None,
     calibration_path: Path | None,
     self_calibrate: bool,
@@ -189,9 +220,12 @@ def fit(
     """Fit the painted line of RECORDING and write the cutting path.
 
     Reads the recording (MCAP, ROS 1 bag or ROS 2 bag directory), stitches the paint seen in
-    every frame, fits an open NURBS or a 3-D skeleton, and places torch set-points
-    perpendicular to the observed surface at the standoff, tilted where the torch would hit
-    the piece, timed by the material's cutting speed.
+    every frame, fits a NURBS or a 3-D skeleton, and places torch set-points perpendicular to
+    the observed surface at the standoff, tilted where the torch would hit the piece, timed by
+    the material's cutting speed. A line that closes on itself (a ring round a pipe, a
+    cut-out) is fitted as a loop and cut from a pierce with a lead-in, once round and past
+    its start; an arc of it no camera saw is bridged by the fit, its set-points flagged
+    unobserved and the arc reported.
 
     When a reference is at hand (the recording's /scrapcut/reference, or --reference), the
     path is measured against it as `scrapcut eval` does, and PATH.error.json and PATH.error.md
@@ -234,8 +268,19 @@ def fit(
         torch_length_m=mm_to_m(torch_length_mm),
         torch_radius_m=mm_to_m(torch_radius_mm),
         speed_table=None if speed_table is None else str(speed_table),
+        start=start,
+        lead_in_m=mm_to_m(lead_in_mm),
+        overlap_m=mm_to_m(overlap_mm),
     )
     config = apply_calibration_options(config, calibration_path, self_calibrate)
+    config = config.override("closure", mode=closure)
+    if start is not None:
+        from scrapcut_cli.toolpath.loop import parse_start
+
+        try:
+            parse_start(start)
+        except ScrapcutError as exc:
+            raise click.BadParameter(str(exc), param_hint="--start") from None
 
     job = Job(
         recording,
@@ -265,7 +310,9 @@ def fit(
         err.print(
             f"[yellow]note:[/] {summary['flagged']} set-point(s) flagged "
             f"(tilted {summary['tilted']}, collision {summary['collision']}, "
-            f"no surface {summary['no_surface']}); see 'flags' in {output}"
+            f"no surface {summary['no_surface']}"
+            + (f", unobserved {summary['unobserved']}" if summary["closed"] else "")
+            + f"); see 'flags' in {output}"
         )
 
 
@@ -307,8 +354,10 @@ def _render(summary: dict[str, Any]) -> None:
         (
             "flagged",
             f"{summary['flagged']} (tilted {summary['tilted']}, collision "
-            f"{summary['collision']}, no surface {summary['no_surface']})",
+            f"{summary['collision']}, no surface {summary['no_surface']}"
+            + (f", unobserved {summary['unobserved']})" if summary["closed"] else ")"),
         ),
+        *_loop_rows(summary),
         (
             "cutting",
             f"{summary['material']} {summary['thickness_mm']:g} mm: "
@@ -330,3 +379,39 @@ def _render(summary: dict[str, Any]) -> None:
     for key, value in rows:
         table.add_row(key, value)
     out.print(table)
+
+
+def _loop_rows(summary: dict[str, Any]) -> list[tuple[str, str]]:
+    """The summary rows of a closed line: how it closed, where the cut starts, what no camera
+    saw."""
+    if not summary["closed"]:
+        return []
+    closure = (summary.get("fitter_info") or {}).get("closure_reason", "")
+    how = {
+        "loop": "paint seen all round",
+        "unobserved_gap": "through an arc no camera saw",
+        "forced_closed": "forced (--closure closed)",
+    }.get(closure, closure)
+    loop = summary.get("loop") or {}
+    pierce = ", ".join(f"{1000 * v:.0f}" for v in loop.get("pierce_point", []))
+    rows = [
+        ("closed loop", f"{how}; {1000 * loop.get('loop_length_m', 0.0):.1f} mm round"),
+        (
+            "cut",
+            f"pierce at {loop.get('start', '?')} ({pierce} mm), lead-in "
+            f"{1000 * loop.get('lead_in_m', 0.0):.1f} mm, overlap "
+            f"{1000 * loop.get('overlap_m', 0.0):.1f} mm",
+        ),
+    ]
+    arcs = summary.get("unobserved_arcs") or []
+    text = (
+        "none"
+        if not arcs
+        else "; ".join(
+            f"{1000 * a['length_m']:.0f} mm at {1000 * a['start_s_m']:.0f}-"
+            f"{1000 * a['end_s_m']:.0f} mm along the cut"
+            for a in arcs
+        )
+    )
+    rows.append(("unobserved arcs", text))
+    return rows

@@ -21,10 +21,20 @@ far from the path, but only a few). So every result also carries:
 The set-points are scored too (:func:`setpoint_error`): the surface point of each set-point
 (where the jet meets the piece) against the reference, and how much of the reference they
 cover, so a path file with a good curve but missing or wandering set-points cannot hide.
+
+A closed reference (a ring, a cut-out) is scored as a loop: its samples run round it, closing
+segment included, and distances are taken to the curve's polyline closed too when the curve is
+closed. What a closed line's scan could not see is scored apart (:class:`LoopError`): the
+error and coverage over the *observed* arcs (outside the arcs no camera saw: the simulator's
+truth when the reference carries it, else the arcs the path reports unobserved), the reported
+unobserved arcs against the true ones (extent error of their ends, in arc length along the
+reference), and the share of set-points on the true arcs flagged ``unobserved`` (and
+elsewhere).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -36,7 +46,9 @@ from scrapcut_cli.errors import EvaluationError
 from scrapcut_cli.geometry import (
     MAX_COORDINATE_M,
     PolylineDistance,
+    closed_polyline,
     cumulative_length,
+    interpolate_polyline,
     resample_polyline,
 )
 
@@ -94,6 +106,8 @@ class PathError:
     median_m: float = float("nan")
     p95_m: float = float("nan")
     sample_points: FloatArray | None = None
+    closed: bool = False
+    loop: LoopError | None = None
 
     @property
     def samples(self) -> int:
@@ -118,6 +132,83 @@ class PathError:
             "curve_length_mm": self.curve_length_m * MM,
             "samples": self.samples,
             "coverage_threshold_mm": self.coverage_threshold_m * MM,
+            **({"closed": True} if self.closed else {}),
+            **({} if self.loop is None else self.loop.summary_mm()),
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class LoopError:
+    """What a closed line's scan saw and what it reports it did not. Metres.
+
+    Attributes
+    ----------
+    observed_mean_m, observed_sd_m, observed_min_m, observed_max_m : float or None
+        The Table I statistics over the reference samples on observed arcs (None: none).
+    observed_coverage : float or None
+        Share of those samples within the coverage threshold.
+    observed_share : float
+        Share of the reference's samples on observed arcs.
+    observed_from : str
+        ``truth`` (the reference's own unseen arcs), ``path`` (the arcs the path reports) or
+        ``all`` (neither: every sample counts as observed).
+    true_arcs_m, reported_arcs_m : list of (float, float)
+        Unobserved arcs as (start, end) arc lengths along the reference from its first point
+        (end < start wraps): the truth (empty when unknown) and the path's, projected.
+    extent_error_m : float or None
+        Largest distance along the reference between the ends of a true arc and of the
+        reported arc overlapping it most; None when no truth, or a true arc has no reported
+        counterpart (``arcs_missed``).
+    arcs_missed : int
+        True arcs no reported arc overlaps.
+    flagged_on_arcs, flagged_elsewhere : float or None
+        Share of set-points flagged ``unobserved`` among those on the true arcs, and among the
+        others (None without truth or set-points).
+    reference_length_m : float
+        The loop's length.
+    """
+
+    observed_mean_m: float | None
+    observed_sd_m: float | None
+    observed_min_m: float | None
+    observed_max_m: float | None
+    observed_coverage: float | None
+    observed_share: float
+    observed_from: str
+    true_arcs_m: list[tuple[float, float]]
+    reported_arcs_m: list[tuple[float, float]]
+    extent_error_m: float | None
+    arcs_missed: int
+    flagged_on_arcs: float | None
+    flagged_elsewhere: float | None
+    reference_length_m: float
+
+    def summary_mm(self) -> dict[str, Any]:
+        def mm(value: float | None) -> float | None:
+            return None if value is None else value * MM
+
+        return {
+            "observed_mean_mm": mm(self.observed_mean_m),
+            "observed_sd_mm": mm(self.observed_sd_m),
+            "observed_min_mm": mm(self.observed_min_m),
+            "observed_max_mm": mm(self.observed_max_m),
+            "observed_coverage": self.observed_coverage,
+            "observed_share": self.observed_share,
+            "observed_from": self.observed_from,
+            "unobserved_true_mm": sum(
+                _span(a, b, self.reference_length_m) for a, b in self.true_arcs_m
+            )
+            * MM,
+            "unobserved_reported_mm": sum(
+                _span(a, b, self.reference_length_m) for a, b in self.reported_arcs_m
+            )
+            * MM,
+            "unobserved_arcs": len(self.reported_arcs_m),
+            "unobserved_true_arcs": len(self.true_arcs_m),
+            "unobserved_extent_error_mm": mm(self.extent_error_m),
+            "unobserved_arcs_missed": self.arcs_missed,
+            "unobserved_flagged_on_arcs": self.flagged_on_arcs,
+            "unobserved_flagged_elsewhere": self.flagged_elsewhere,
         }
 
 
@@ -126,6 +217,12 @@ def path_error(
     reference: ArrayLike,
     *,
     config: EvaluationConfig | None = None,
+    curve_closed: bool = False,
+    reference_closed: bool = False,
+    true_unseen_arcs_m: Sequence[tuple[float, float]] | None = None,
+    reported_unobserved_m: Sequence[tuple[float, float]] = (),
+    setpoints: ArrayLike | None = None,
+    setpoint_unobserved: ArrayLike | None = None,
 ) -> PathError:
     """Measure a fitted curve against the painted reference curve.
 
@@ -138,6 +235,16 @@ def path_error(
         The painted reference curve, an ordered polyline.
     config : EvaluationConfig
         Sample spacing (default 1 mm) and coverage threshold (default 10 mm).
+    curve_closed, reference_closed : bool
+        The curve (its last point joins its first) and the reference are loops.
+    true_unseen_arcs_m : list of (start, end), optional
+        A closed reference's arcs no camera saw, metres along it from its first point (end <
+        start wraps): the simulator's truth. Scored as :class:`LoopError`.
+    reported_unobserved_m : list of (start, end)
+        The arcs the path reports unobserved, metres along ``curve_points`` from its first
+        point (end < start wraps).
+    setpoints, setpoint_unobserved : (K, 3) float64 and (K,) bool, optional
+        The set-points' surface points on the loop and which carry ``unobserved``.
 
     Raises
     ------
@@ -152,6 +259,11 @@ def path_error(
             raise EvaluationError(f"evaluation.{name} must be a finite number > 0, got {value}")
     curve = _polyline(curve_points, "fitted curve")
     ref = _polyline(reference, "reference")
+    curve_vertices = curve
+    if curve_closed:
+        curve = closed_polyline(curve)
+    if reference_closed:
+        ref = closed_polyline(ref)
 
     ref_samples = resample_polyline(ref, config.sample_spacing_m)
     s = cumulative_length(ref_samples)
@@ -181,6 +293,21 @@ def path_error(
         median_m=float(np.median(errors)),
         p95_m=float(np.percentile(errors, 95.0)),
         sample_points=ref_samples,
+        closed=reference_closed,
+        loop=None
+        if not reference_closed
+        else loop_error(
+            ref_samples,
+            s,
+            errors,
+            curve_vertices,
+            curve_closed=curve_closed,
+            threshold_m=float(config.coverage_threshold_m),
+            true_arcs=list(true_unseen_arcs_m) if true_unseen_arcs_m is not None else None,
+            reported=list(reported_unobserved_m),
+            setpoints=setpoints,
+            setpoint_unobserved=setpoint_unobserved,
+        ),
     )
 
 
@@ -268,6 +395,112 @@ def setpoint_error(
         max_m=float(d.max()),
         coverage=float(np.mean(covered)),
     )
+
+
+def loop_error(
+    ref_samples: FloatArray,
+    s: FloatArray,
+    errors: FloatArray,
+    curve: FloatArray,
+    *,
+    curve_closed: bool,
+    threshold_m: float,
+    true_arcs: list[tuple[float, float]] | None,
+    reported: list[tuple[float, float]],
+    setpoints: ArrayLike | None,
+    setpoint_unobserved: ArrayLike | None,
+) -> LoopError:
+    """:class:`LoopError` of a closed reference sampled at ``ref_samples`` (M, 3) (arc lengths
+    ``s`` (M,), the last sample closing the loop) with sample errors (M,), for a fitted
+    ``curve`` (N, 3) whose reported unobserved arcs are ``reported`` (metres along it)."""
+    length = float(s[-1])
+    ref_line = PolylineDistance(ref_samples)
+    projected = []
+    if reported:
+        c_poly = closed_polyline(curve) if curve_closed else curve
+        c_s = cumulative_length(c_poly)
+        # Does the curve run the reference's way round? (median step of its vertices' places)
+        places = np.interp(ref_line.query(c_poly)[2], np.arange(len(s)), s)
+        steps = (np.diff(places) + 0.5 * length) % length - 0.5 * length
+        same_way = float(np.median(steps)) >= 0.0
+        for a, b in reported:
+            ends = interpolate_polyline(c_poly, [a, b], cumulative=c_s)
+            u = ref_line.query(ends)[2]
+            sa, sb = np.interp(u, np.arange(len(s)), s)
+            if not same_way:
+                sa, sb = sb, sa
+            projected.append((float(sa) % length, float(sb) % length))
+    if true_arcs is not None:
+        unseen, origin = _in_arcs(s, true_arcs, length), "truth"
+    elif projected:
+        unseen, origin = _in_arcs(s, projected, length), "path"
+    else:
+        unseen, origin = np.zeros(len(s), dtype=bool), "all"
+    seen = ~unseen
+    e = errors[seen]
+    extent, missed = None, 0
+    if true_arcs is not None:
+        gaps = []
+        for a, b in true_arcs:
+            best = max(projected, key=lambda r: _overlap((a, b), r, length), default=None)
+            if best is None or _overlap((a, b), best, length) <= 0.0:
+                missed += 1
+                continue
+            gaps += [_circular(a - best[0], length), _circular(b - best[1], length)]
+        extent = None if missed or not gaps else float(max(gaps))
+    on_arcs = elsewhere = None
+    if true_arcs is not None and setpoints is not None and setpoint_unobserved is not None:
+        sp = np.asarray(setpoints, dtype=np.float64).reshape(-1, 3)
+        flagged = np.asarray(setpoint_unobserved, dtype=bool).reshape(-1)
+        if len(sp):
+            u = ref_line.query(sp)[2]
+            where = _in_arcs(np.interp(u, np.arange(len(s)), s), true_arcs, length)
+            on_arcs = float(flagged[where].mean()) if where.any() else None
+            elsewhere = float(flagged[~where].mean()) if (~where).any() else None
+    result = LoopError(
+        observed_mean_m=float(e.mean()) if len(e) else None,
+        observed_sd_m=float(e.std()) if len(e) else None,
+        observed_min_m=float(e.min()) if len(e) else None,
+        observed_max_m=float(e.max()) if len(e) else None,
+        observed_coverage=float(np.mean(e <= threshold_m)) if len(e) else None,
+        observed_share=float(seen.mean()),
+        observed_from=origin,
+        true_arcs_m=list(true_arcs or []),
+        reported_arcs_m=projected,
+        extent_error_m=extent,
+        arcs_missed=missed,
+        flagged_on_arcs=on_arcs,
+        flagged_elsewhere=elsewhere,
+        reference_length_m=length,
+    )
+    return result
+
+
+def _span(a: float, b: float, length: float) -> float:
+    return (b - a) % length if length > 0 and b != a else (length if b == a else b - a)
+
+
+def _in_arcs(
+    s: FloatArray, arcs: Sequence[tuple[float, float]], length: float
+) -> NDArray[np.bool_]:
+    inside = np.zeros(len(s), dtype=bool)
+    for a, b in arcs:
+        if b >= a:
+            inside |= (s >= a) & (s <= b)
+        else:
+            inside |= (s >= a) | (s <= b)
+    return inside
+
+
+def _overlap(x: tuple[float, float], y: tuple[float, float], length: float) -> float:
+    """Length of the overlap of two arcs on a loop (sampled every millimetre)."""
+    grid = np.arange(0.0, length, 0.001)
+    return float(np.sum(_in_arcs(grid, [x], length) & _in_arcs(grid, [y], length)) * 0.001)
+
+
+def _circular(d: float, length: float) -> float:
+    d = d % length
+    return min(d, length - d)
 
 
 def _polyline(points: ArrayLike, what: str) -> FloatArray:

@@ -3,10 +3,17 @@
 This is the evaluation's input layer (as ``recording/`` is the pipeline's): path files are
 ``scrapcut.path/v1`` JSON (DESIGN.md); a reference is a recording with /scrapcut/reference or a
 CSV with the header ``x,y,z`` (metres, base frame, ordered along the curve).
+
+A closed reference (a ring, a cut-out) is scored as a loop. A recording says so in its
+``scrapcut_reference`` metadata (the simulator writes ``closed`` and the arcs no image showed,
+``unseen_arcs``); a CSV says so with a comment line ``# closed: true`` anywhere before the
+rows (e.g. above the header), or by ending on its first point again (within 0.1 mm; the
+repeated row is dropped).
 """
 
 from __future__ import annotations
 
+import json
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -23,7 +30,7 @@ from scrapcut_cli.evaluation.checks import check_scale, row_warnings
 from scrapcut_cli.evaluation.metrics import path_error, setpoint_error
 from scrapcut_cli.evaluation.report import ReportRow
 from scrapcut_cli.fitting.curve import Curve
-from scrapcut_cli.geometry import MAX_COORDINATE_M
+from scrapcut_cli.geometry import MAX_COORDINATE_M, closed_polyline
 from scrapcut_cli.toolpath.path import CuttingPath
 
 
@@ -51,6 +58,10 @@ class PathFile:
         default_factory=lambda: np.zeros((0, 4))
     )
     source_start_ns: int | None = None
+    closed: bool = False
+    unobserved_arcs_m: tuple[tuple[float, float], ...] = ()
+    setpoints: NDArray[np.float64] | None = None  # (K, 3) surface points of the cut
+    setpoint_unobserved: NDArray[np.bool_] | None = None  # (K,)
 
     @property
     def name(self) -> str:
@@ -72,6 +83,8 @@ class Reference:
     object: str | None = None
     metadata: dict[str, Any] = field(default_factory=dict)
     frame_id: str | None = None
+    closed: bool = False
+    unseen_arcs_m: tuple[tuple[float, float], ...] | None = None  # truth; None: unknown
 
     @property
     def oracle_views(self) -> bool:
@@ -117,6 +130,8 @@ def _path_file(path: Path, curve: Curve, cutting: CuttingPath, meta: dict[str, A
     source = meta.get("source")
     source_path = source.get("path") if isinstance(source, dict) else None
     start = source.get("start_ns") if isinstance(source, dict) else None
+    arcs = _arc_pairs(curve.info.get("unobserved_arcs_m"), f"{path}: curve.info.unobserved_arcs_m")
+    cut = [i for i, g in enumerate(cutting.segments or ["cut"] * len(cutting)) if g != "lead_in"]
     return PathFile(
         path=path,
         curve_points=np.asarray(curve.points, dtype=np.float64),
@@ -129,26 +144,67 @@ def _path_file(path: Path, curve: Curve, cutting: CuttingPath, meta: dict[str, A
         setpoint_positions=np.asarray(cutting.positions, dtype=np.float64).reshape(-1, 3),
         setpoint_orientations_xyzw=np.asarray(cutting.orientations_xyzw).reshape(-1, 4),
         source_start_ns=start if isinstance(start, int) and not isinstance(start, bool) else None,
+        closed=curve.closed,
+        unobserved_arcs_m=arcs,
+        setpoints=cutting.surface_points[cut],
+        setpoint_unobserved=np.array(["unobserved" in cutting.flags[i] for i in cut], dtype=bool),
     )
+
+
+def _arc_pairs(value: Any, where: str) -> tuple[tuple[float, float], ...]:
+    """[[start, end], ...] of finite numbers as a tuple of pairs (EvaluationError otherwise)."""
+    if value is None:
+        return ()
+    try:
+        arcs = np.asarray(value, dtype=np.float64).reshape(-1, 2)
+    except (TypeError, ValueError):
+        raise EvaluationError(f"{where} must be a list of [start, end] pairs") from None
+    if not np.isfinite(arcs).all():
+        raise EvaluationError(f"{where} holds NaN or infinite values")
+    return tuple((float(a), float(b)) for a, b in arcs)
 
 
 def read_reference_csv(path: str | Path) -> NDArray[np.float64]:
     """(M, 3) reference points from a CSV with header ``x,y,z`` (metres, base frame)."""
+    return read_reference_csv_loop(path)[0]
+
+
+#: A CSV reference ending this close to its first point is closed (its last row repeats it).
+CLOSING_TOLERANCE_M = 1e-4
+
+
+def read_reference_csv_loop(path: str | Path) -> tuple[NDArray[np.float64], bool]:
+    """(M, 3) reference points from a CSV with header ``x,y,z`` (metres, base frame), and
+    whether the reference is closed (a ``# closed: true`` line, or the last row back on the
+    first; the repeated row is dropped). Other ``#`` lines are comments."""
     path = Path(path)
+    closed = False
     try:
         check_input_file(path, "reference CSV")
         # utf-8-sig: a spreadsheet's export starts with a byte-order mark.
         with path.open(encoding="utf-8-sig") as f:
-            header = [h.strip().lower() for h in f.readline().split(",")]
+            line = f.readline()
+            while line.lstrip().startswith("#"):
+                closed |= _closed_marker(line)
+                line = f.readline()
+            header = [h.strip().lower() for h in line.split(",")]
             with warnings.catch_warnings():
                 # A header without rows is reported below (one line), not warned about.
                 warnings.simplefilter("ignore", UserWarning)
-                rows = np.loadtxt(f, delimiter=",", dtype=np.float64, ndmin=2)
+                rest = f.read()
     except FileError as exc:
         if "not found" in str(exc):
             raise EvaluationError(f"reference not found: {path}") from None
         raise EvaluationError(str(exc)) from None
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
+    except (OSError, UnicodeDecodeError) as exc:
+        raise EvaluationError(f"cannot read reference CSV {path}: {exc}") from None
+    lines = rest.splitlines()
+    closed |= any(_closed_marker(text) for text in lines if text.lstrip().startswith("#"))
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            rows = np.loadtxt(lines, delimiter=",", dtype=np.float64, ndmin=2, comments="#")
+    except ValueError as exc:
         raise EvaluationError(f"cannot read reference CSV {path}: {exc}") from None
     if header[:3] != ["x", "y", "z"]:
         raise EvaluationError(f"reference CSV {path} must start with the header x,y,z (metres)")
@@ -160,14 +216,23 @@ def read_reference_csv(path: str | Path) -> NDArray[np.float64]:
             f"reference CSV {path}: {len(bad)} row(s) with NaN or infinite coordinates or "
             f"beyond {MAX_COORDINATE_M:g} m (first: line {int(bad[0]) + 2})"
         )
-    return np.ascontiguousarray(rows[:, :3])
+    points = np.ascontiguousarray(rows[:, :3])
+    if len(points) > 3 and np.linalg.norm(points[-1] - points[0]) <= CLOSING_TOLERANCE_M:
+        points, closed = points[:-1].copy(), True
+    return points, closed
+
+
+def _closed_marker(line: str) -> bool:
+    key, _, value = line.lstrip().lstrip("#").partition(":")
+    return key.strip().lower() == "closed" and value.strip().lower() in ("true", "yes", "1")
 
 
 def load_reference(path: str | Path, *, config: RecordingConfig | None = None) -> Reference:
     """A reference from a CSV (``.csv``) or from a recording's /scrapcut/reference."""
     path = Path(path)
     if path.suffix.lower() == ".csv":
-        return Reference(points=read_reference_csv(path), origin=path)
+        points, closed = read_reference_csv_loop(path)
+        return Reference(points=points, origin=path, closed=closed)
     reference = recording_reference(path, config=config)
     if reference is None:
         raise EvaluationError(
@@ -188,15 +253,25 @@ def recording_reference(
     with open_recording(path, config) as rec:
         found = rec.reference_in_frame()
         metadata = dict(rec.metadata.get("scrapcut", {}))
+        loop = dict(rec.metadata.get("scrapcut_reference", {}))
     if found is None or len(found[0]) < 2:
         return None
     name = metadata.get("object")
+    closed = str(loop.get("closed", "false")).lower() == "true"
+    unseen = None
+    if closed and "unseen_arcs" in loop:
+        try:
+            unseen = _arc_pairs(json.loads(loop["unseen_arcs"]), f"{path}: unseen_arcs")
+        except json.JSONDecodeError:
+            raise EvaluationError(f"{path}: scrapcut_reference.unseen_arcs is not JSON") from None
     return Reference(
         points=np.asarray(found[0], dtype=np.float64),
         origin=path,
         object=str(name) if name else None,
         metadata=metadata,
         frame_id=found[1] or None,
+        closed=closed,
+        unseen_arcs_m=unseen,
     )
 
 
@@ -253,6 +328,35 @@ def evaluate_path_files(
     return rows
 
 
+def loop_summary(figures: dict[str, Any]) -> str:
+    """One phrase on a closed reference's figures: the observed arcs' error and coverage, the
+    unobserved arcs reported against the true ones."""
+    parts = []
+    if figures.get("observed_mean_mm") is not None and figures.get("observed_share", 1.0) < 1.0:
+        parts.append(
+            f"observed arcs ({100.0 * figures['observed_share']:.0f} % of the loop): mean "
+            f"{figures['observed_mean_mm']:.2f} mm, max {figures['observed_max_mm']:.2f} mm, "
+            f"coverage {100.0 * figures['observed_coverage']:.1f} %"
+        )
+    reported, true = figures.get("unobserved_arcs", 0), figures.get("unobserved_true_arcs", 0)
+    if reported or true:
+        text = f"unobserved {figures['unobserved_reported_mm']:.0f} mm reported"
+        if figures.get("observed_from") == "truth":
+            text += f", {figures['unobserved_true_mm']:.0f} mm true"
+            if figures.get("unobserved_extent_error_mm") is not None:
+                text += f" (ends within {figures['unobserved_extent_error_mm']:.1f} mm)"
+            on, off = (
+                figures.get("unobserved_flagged_on_arcs"),
+                figures.get("unobserved_flagged_elsewhere"),
+            )
+            if on is not None:
+                text += f"; {100.0 * on:.0f} % of set-points on them flagged"
+                if off is not None:
+                    text += f", {100.0 * off:.0f} % elsewhere"
+        parts.append(text)
+    return "closed" + ("; " + "; ".join(parts) if parts else "")
+
+
 def evaluate_path_file(
     path_file: PathFile,
     reference: Reference,
@@ -285,11 +389,21 @@ def evaluate_path_file(
     )
     alignment = aligned = None
     try:
-        error = path_error(path_file.curve_points, reference.points, config=config)
+        error = path_error(
+            path_file.curve_points,
+            reference.points,
+            config=config,
+            curve_closed=path_file.closed,
+            reference_closed=reference.closed,
+            true_unseen_arcs_m=reference.unseen_arcs_m,
+            reported_unobserved_m=path_file.unobserved_arcs_m,
+            setpoints=path_file.setpoints,
+            setpoint_unobserved=path_file.setpoint_unobserved,
+        )
         setpoints = setpoint_error(
             path_file.setpoint_surface_points,
             path_file.setpoint_flags,
-            reference.points,
+            closed_polyline(reference.points) if reference.closed else reference.points,
             config=config,
         )
         if align:
@@ -301,12 +415,15 @@ def evaluate_path_file(
             aligned = path_error(alignment.aligned_points, reference.points, config=config)
     except ScrapcutError as exc:
         raise EvaluationError(f"{path_file.path}: {exc}") from None
+    loop_note = loop_summary(error.summary_mm()) if error.loop is not None else ""
+    if reference.closed and not path_file.closed:
+        loop_note = "; ".join(n for n in ("the path is open, the reference a loop", loop_note) if n)
     return ReportRow(
         object=object_name or reference.object or path_file.path.stem,
         method=path_file.method,
         error=error,
         params=path_file.params,
-        note=note,
+        note="; ".join(n for n in (note, loop_note) if n),
         source=str(path_file.path),
         curve_points=path_file.curve_points,
         reference_points=reference.points,

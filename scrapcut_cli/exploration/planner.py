@@ -29,6 +29,13 @@ so the same frames and the same reachability answers give the same decisions, wh
    the normal gives no view are the last viewing direction, straight down and then the surface's
    other side (``other_side_views``: a mesh or a sheet seen from behind) tried.
 
+Stopping on a closed line (a ring round a pipe, a cut-out): after every view that found new
+paint the stitched paint is checked for closure (:mod:`~scrapcut_cli.fitting.closure`); when the
+line being followed has run into the paint seen from the other direction, the run stops
+(``loop_closed``). When the second direction ends (no growth, no feasible view) and the paint
+closes through an arc no frame saw (both ends unobserved, facing each other along one arc),
+the run stops with ``unobserved_arc``. The final log entry carries the closure (``loop``).
+
 Stopping: growth(k) <= ``delta_size`` ends a direction. Before declaring an endpoint there, the
 planner checks that the observed surface goes on past the curve's end in a fan of directions (a
 paint end on a continuing surface is a real end) and that the curve does not turn sharply there;
@@ -93,7 +100,7 @@ from scrapcut_cli.exploration.views import (
     unit,
     view_pose,
 )
-from scrapcut_cli.fitting import extrapolate_end, fit_curve
+from scrapcut_cli.fitting import detect_closure, extrapolate_end, fit_curve
 from scrapcut_cli.fitting.curve import Curve
 from scrapcut_cli.geometry import (
     PolylineDistance,
@@ -125,6 +132,9 @@ SKELETON_RETRY_LEAVES_M = (0.01, 0.02, 0.04)
 #: A direction ends at an endpoint when growth stops there or the next target was explored
 #: already (the paper's log of visited positions).
 ENDPOINT_REASONS = ("endpoint", "revisit")
+#: A run on a closed line stops when its two directions meet (the paint goes all round), or
+#: when both ended where no view reached further and the line closes across what no frame saw.
+LOOP_CLOSED, UNOBSERVED_ARC = "loop_closed", "unobserved_arc"
 #: Targets tried beyond a curve's end, in steps: a full one, half, the tip itself.
 STEP_FRACTIONS = (1.0, 0.5, 0.0)
 #: A wall across the line's way: observed cells this high above the surface's plane at the tip
@@ -393,6 +403,7 @@ class ExplorationPlanner:
         self.ends: list[dict[str, Any]] = []
         self.finished = False
         self.stop_reason: str | None = None
+        self.loop: dict[str, Any] | None = None  # the closure found when the run stopped on it
         self._k = 0
         self._pending = "initial"  # what the last decision asked for
         self._direction = 0
@@ -505,6 +516,8 @@ class ExplorationPlanner:
             info["end_evidence"] = [dict(e) for e in self._evidence_notes]
         if decision.stop:
             info["ends"] = [dict(e) for e in self.ends]
+            if self.loop is not None:
+                info["loop"] = dict(self.loop)
         if k == 0:
             info["tool_version"] = __version__
             info["initial_view"] = pose_to_dict(self.initial_view)
@@ -549,6 +562,9 @@ class ExplorationPlanner:
             end = self._extend(self._initial_ends[1], obs)
             return self._advance(self._initial_ends[1] if end is None else end)
         # pending is "extrapolate" or "look_past": the view looked beyond the frontier.
+        if growth > c.delta_size and self._closes_loop(gap=False):
+            # The line ran into the paint explored from the other side: a loop, closed.
+            return self._finish(LOOP_CLOSED)
         if obs.clouds.skipped:
             return self._end_direction("paint_lost")
         if growth <= c.delta_size:
@@ -717,11 +733,18 @@ class ExplorationPlanner:
         self.ends.append(entry)
         if reason in ENDPOINT_REASONS:
             self.endpoints_found += 1
+        if self._direction == 0 and self._closes_loop(gap=False):
+            # The first direction came round to where it started (a revisit): paint all
+            # round, the loop is closed without going back for the other direction.
+            return self._finish(LOOP_CLOSED)
         if self._direction == 1:
             final = "done" if self.endpoints_found == 2 else reason
-            if self.config.exploration.calibration_views > 0:
-                return self._start_calibration_views(final)
-            return self._stop(final)
+            if self._closes_loop(gap=True):
+                # Both directions ended where no view reached further, facing each other
+                # across what no frame saw: a loop with an unobserved arc.
+                gap = self.loop is not None and self.loop.get("reason") == "unobserved_gap"
+                final = UNOBSERVED_ARC if gap else LOOP_CLOSED
+            return self._finish(final)
         self._direction = 1
         self._frontier = self._initial_ends[1]
         if self._pending in ("initial", "return"):
@@ -779,6 +802,34 @@ class ExplorationPlanner:
                 info = {"action": CALIBRATION_REASON, "left": len(self._calibration_poses)}
                 return Decision(T, CALIBRATION_REASON, info=info)
         return self._stop(self._final_reason)
+
+    def _closes_loop(self, *, gap: bool) -> bool:
+        """Whether the stitched paint closes on itself (:func:`~scrapcut_cli.fitting.closure.
+        detect_closure` with the stitched surface): paint all round, or (``gap``) also through
+        an arc no frame saw. The decision is kept in ``loop`` and logged."""
+        if self.config.closure.mode == "open" or self.stitcher.size < 8:
+            return False
+        try:
+            closure = detect_closure(
+                self.stitcher.paint_points,
+                self.stitcher.surface_points,
+                config=self.config.closure,
+            )
+        except FittingError:
+            return False
+        closed = closure.closed and (gap or closure.reason != "unobserved_gap")
+        if closed:
+            info = closure.info()
+            self.loop = {
+                k: info[k] for k in ("reason", "gap_m", "bridge_length_m", "chain_length_m")
+            }
+        return closed
+
+    def _finish(self, final: str) -> Decision:
+        """The line is explored: the calibration views if asked for, then stop with ``final``."""
+        if self.config.exploration.calibration_views > 0:
+            return self._start_calibration_views(final)
+        return self._stop(final)
 
     def _stop(self, reason: str) -> Decision:
         self.finished = True

@@ -15,17 +15,22 @@ from numpy.typing import ArrayLike, NDArray
 
 from scrapcut_cli.config import FitMethod, ScrapcutConfig, choice_names
 from scrapcut_cli.errors import FittingError
+from scrapcut_cli.fitting.closure import Closure, detect_closure, unobserved_arcs
 from scrapcut_cli.fitting.curve import Curve, NurbsModel
 from scrapcut_cli.fitting.nurbs import fit_nurbs, nurbs_to_geomdl, nurbs_to_geomdl_json
+from scrapcut_cli.fitting.nurbs_closed import fit_closed_nurbs
 from scrapcut_cli.fitting.skeleton import fit_skeleton
 from scrapcut_cli.geometry import cumulative_length
 
 __all__ = [
     "METHODS",
+    "Closure",
     "Curve",
     "NurbsModel",
+    "detect_closure",
     "extrapolate_end",
     "fit_curve",
+    "fit_line",
     "fit_nurbs",
     "fit_skeleton",
     "nurbs_to_geomdl",
@@ -38,14 +43,66 @@ METHODS = choice_names(FitMethod)
 END_CHORD_M = 0.01
 
 
-def fit_curve(points_base: ArrayLike, method: str, config: ScrapcutConfig) -> Curve:
+def fit_curve(
+    points_base: ArrayLike,
+    method: str,
+    config: ScrapcutConfig,
+    *,
+    closure: Closure | None = None,
+) -> Curve:
     """Fit the curve of ``method`` ("nurbs" or "skeleton") to ``points_base`` (N, 3) float64,
-    metres, base frame, with that method's section of ``config``."""
+    metres, base frame, with that method's section of ``config``.
+
+    ``closure``: :func:`~scrapcut_cli.fitting.closure.detect_closure` of these points (and the
+    surface around them); when it is closed the fit is a loop (a periodic NURBS, the
+    skeleton's cycle) and ``info`` holds the closure. None: an open fit.
+    """
+    if method not in METHODS:
+        raise FittingError(f"unknown fitting method {method!r}; known: {', '.join(METHODS)}")
+    if closure is not None and closure.closed:
+        if method == "nurbs":
+            curve = fit_closed_nurbs(points_base, closure=closure, config=config.nurbs)
+        else:
+            curve = fit_skeleton(points_base, config=config.skeleton, closure=closure)
+        curve.info["closure"] = closure.info()
+        curve.info["closure_reason"] = closure.reason
+        return curve
     if method == "nurbs":
-        return fit_nurbs(points_base, config=config.nurbs)
-    if method == "skeleton":
-        return fit_skeleton(points_base, config=config.skeleton)
-    raise FittingError(f"unknown fitting method {method!r}; known: {', '.join(METHODS)}")
+        curve = fit_nurbs(points_base, config=config.nurbs)
+    else:
+        curve = fit_skeleton(points_base, config=config.skeleton)
+    if closure is not None:
+        curve.info["closure"] = closure.info()
+        curve.info["closure_reason"] = closure.reason
+    return curve
+
+
+def fit_line(
+    paint_base: ArrayLike,
+    surface_base: ArrayLike | None,
+    method: str,
+    config: ScrapcutConfig,
+) -> Curve:
+    """A stitched line's curve, open or closed: the global fit of a scan.
+
+    Decides whether the paint ``paint_base`` (N, 3) closes on itself, with the observed bare
+    surface ``surface_base`` (M, 3) around it (metres, base frame; :func:`detect_closure`),
+    fits ``method`` open or closed, and on a closed curve finds the arcs where neither paint
+    nor surface was observed (``info["unobserved_arcs_m"]``: [start, end] metres along
+    ``points`` from its first point, end < start when an arc runs across it).
+    """
+    closure = detect_closure(paint_base, surface_base, config=config.closure)
+    curve = fit_curve(paint_base, method, config, closure=closure)
+    if curve.closed:
+        arcs = unobserved_arcs(
+            curve.points,
+            paint_base,
+            surface_base,
+            half_width_m=closure.half_width_m,
+            min_arc_m=config.closure.min_unobserved_arc_m,
+        )
+        curve.info["unobserved_arcs_m"] = [[a, b] for a, b in arcs]
+    return curve
 
 
 def extrapolate_end(

@@ -9,7 +9,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import BSpline
 
-from scrapcut_cli.geometry import polyline_length, resample_polyline
+from scrapcut_cli.geometry import (
+    closed_polyline,
+    polyline_length,
+    resample_loop,
+    resample_polyline,
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -17,12 +22,19 @@ class NurbsModel:
     """A NURBS curve: degree p, knot vector (M + p + 1,), control points (M, 3), weights (M,).
 
     Parameter domain is ``[knots[p], knots[-p-1]]`` (``[0, 1]`` for the fitter's clamped knots).
+
+    ``periodic``: a closed curve in the unclamped (wrapped) form that exchange formats such as
+    geomdl read as an ordinary NURBS: uniform knots over [0, 1] whose domain is the middle
+    part, and the first p control points (and weights) repeated at the end, so the curve
+    returns to its start with matching derivatives. Evaluation wraps the parameter round the
+    domain.
     """
 
     degree: int
     knots: NDArray[np.float64]
     control_points: NDArray[np.float64]
     weights: NDArray[np.float64]
+    periodic: bool = False
 
     def __post_init__(self) -> None:
         m = len(self.control_points)
@@ -39,9 +51,11 @@ class NurbsModel:
         return float(self.knots[self.degree]), float(self.knots[-self.degree - 1])
 
     def evaluate(self, t: ArrayLike) -> NDArray[np.float64]:
-        """Points (N, 3) at parameters ``t`` (N,), clamped to the domain (never wrapped)."""
+        """Points (N, 3) at parameters ``t`` (N,), clamped to the domain (wrapped round it when
+        ``periodic``)."""
         lo, hi = self.domain
-        tt = np.clip(np.asarray(t, dtype=np.float64), lo, hi)
+        tt = np.asarray(t, dtype=np.float64)
+        tt = lo + np.mod(tt - lo, hi - lo) if self.periodic else np.clip(tt, lo, hi)
         w = np.asarray(self.weights, dtype=np.float64)
         homogeneous = np.column_stack([self.control_points * w[:, None], w])
         spline = BSpline(self.knots, homogeneous, self.degree, extrapolate=False)
@@ -49,12 +63,15 @@ class NurbsModel:
         return np.asarray(h[:, :3] / h[:, 3:4])
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        out: dict[str, Any] = {
             "degree": int(self.degree),
             "knots": [float(k) for k in self.knots],
             "control_points": [[float(c) for c in p] for p in self.control_points],
             "weights": [float(w) for w in self.weights],
         }
+        if self.periodic:
+            out["periodic"] = True
+        return out
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> NurbsModel:
@@ -63,6 +80,7 @@ class NurbsModel:
             knots=np.asarray(data["knots"], dtype=np.float64),
             control_points=np.asarray(data["control_points"], dtype=np.float64).reshape(-1, 3),
             weights=np.asarray(data["weights"], dtype=np.float64),
+            periodic=bool(data.get("periodic", False)),
         )
 
 
@@ -77,6 +95,8 @@ class Curve:
 
     ``points`` are evenly resampled along the curve (spacing ``spacing_m``). ``nurbs`` is set by
     the NURBS fitter; ``info`` carries method diagnostics (residuals, iterations, pieces...).
+    ``closed``: the curve is a loop; its last point joins its first, which ``points`` does not
+    repeat (:attr:`polyline` does).
     """
 
     points: NDArray[np.float64]
@@ -84,14 +104,24 @@ class Curve:
     nurbs: NurbsModel | None = None
     spacing_m: float = 0.001
     info: dict[str, Any] = field(default_factory=dict)
+    closed: bool = False
+
+    @property
+    def polyline(self) -> NDArray[np.float64]:
+        """The curve as a polyline from its start to its end: ``points``, with the first point
+        repeated at the end when ``closed`` (N + 1, 3)."""
+        return closed_polyline(self.points) if self.closed else self.points
 
     @property
     def length(self) -> float:
-        """Arc length in metres."""
-        return polyline_length(self.points)
+        """Arc length in metres (a loop's closing segment included)."""
+        return polyline_length(self.polyline)
 
     def sample(self, spacing: float) -> NDArray[np.float64]:
-        """Evenly spaced points (K, 3), ``spacing`` metres apart, both ends included."""
+        """Evenly spaced points (K, 3), ``spacing`` metres apart, both ends included (a loop's
+        start is not repeated)."""
+        if self.closed:
+            return resample_loop(self.points, spacing)
         return resample_polyline(self.points, spacing)
 
     def reversed(self) -> Curve:
@@ -106,20 +136,30 @@ class Curve:
                 knots=(lo + hi) - n.knots[::-1],
                 control_points=n.control_points[::-1].copy(),
                 weights=n.weights[::-1].copy(),
+                periodic=n.periodic,
             )
         info = dict(self.info)
         for key in ORDERED_INFO:
             if isinstance(info.get(key), list | tuple):
                 info[key] = list(info[key])[::-1]
+        if self.closed and isinstance(info.get("unobserved_arcs_m"), list):
+            # Arc lengths from the start (kept) run the other way round the loop.
+            total = self.length
+            info["unobserved_arcs_m"] = sorted(
+                [(total - b) % total, (total - a) % total] for a, b in info["unobserved_arcs_m"]
+            )
         if "end_trim_start_m" in info and "end_trim_end_m" in info:
             info["end_trim_start_m"], info["end_trim_end_m"] = (
                 info["end_trim_end_m"],
                 info["end_trim_start_m"],
             )
+        # A loop reversed keeps its start point.
+        points = np.roll(self.points[::-1], 1, axis=0) if self.closed else self.points[::-1]
         return Curve(
-            points=self.points[::-1].copy(),
+            points=points.copy(),
             method=self.method,
             nurbs=nurbs,
             spacing_m=self.spacing_m,
             info=info,
+            closed=self.closed,
         )

@@ -9,10 +9,12 @@ graph work; the centroid reduction keeps the dense distance matrix small.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import dijkstra, minimum_spanning_tree
+from scipy.sparse.csgraph import connected_components, dijkstra, minimum_spanning_tree
 from scipy.spatial.distance import pdist, squareform
 
 from scrapcut_cli.fitting._common import arc_positions, moving_average
@@ -113,6 +115,161 @@ def geodesic_positions(
         return _principal_positions(points)
     position = _positions_on(chain, points)
     return position, float(cumulative_length(chain)[-1])
+
+
+@dataclass(frozen=True, eq=False)
+class PaintChain:
+    """A chain down the middle of a curve-like cloud (see :func:`paint_chain`).
+
+    ``points`` (K, 3) from one end of the line to the other, or once round a loop from and back
+    to (next to) its start; ``loop``: the cloud goes all the way round; ``used`` (N,): the
+    points it was made from (strays and small detached blobs left out).
+    """
+
+    points: FloatArray
+    loop: bool
+    used: NDArray[np.bool_]
+
+
+def paint_chain(
+    points: FloatArray,
+    *,
+    voxel_m: float = 0.01,
+    max_nodes: int = 400,
+    link_factor: float = 5.0,
+    neighbours: int = 8,
+) -> PaintChain:
+    """The chain down the middle of a curve-like cloud (N, 3), and whether it is a loop.
+
+    Voxel centroids (voxels holding under a tenth of the median count left out) are linked as
+    in :func:`geodesic_positions`: their minimum spanning tree, whose links longer than
+    ``link_factor`` typical ones are cut (the piece holding the most points is kept: stray
+    blobs fall away, a wire mesh's gaps do not), plus links to near neighbours no longer than
+    2.5 typical links (distances run smoothly along a wide band). Two Dijkstra sweeps give the
+    two nodes farthest apart, a and b: the ends of a line, or two opposite points of a loop.
+    With a disk around each cut out of the graph (wider than the band), a line leaves one piece
+    and a loop two arcs, each joining the disks. A loop is then cut next to a, between the
+    nodes nearer one arc and those nearer the other, and geodesic distances from a run once
+    round it. Slices of the geodesic distance, one voxel thick, are averaged into the chain,
+    which is straightened twice by slicing the points across it.
+    """
+    size = float(voxel_m)
+    while True:
+        centroids, counts, inverse = voxel_centroids(points, size)
+        keep = counts >= max(1.0, 0.1 * float(np.median(counts)))
+        if int(keep.sum()) <= max_nodes:
+            break
+        size *= 1.25
+    node_of = np.full(len(centroids), -1, dtype=np.int64)
+    node_of[keep] = np.arange(int(keep.sum()))
+    nodes, weight = centroids[keep], counts[keep].astype(np.float64)
+    if len(nodes) < 3:
+        return PaintChain(nodes.copy(), False, node_of[inverse] >= 0)
+    distances = squareform(pdist(nodes))
+    tree = minimum_spanning_tree(distances).tocoo()
+    typical = float(np.median(tree.data))
+    short = tree.data <= link_factor * typical
+    pruned = csr_matrix(
+        (tree.data[short], (tree.row[short], tree.col[short])), shape=distances.shape
+    )
+    _, labels = connected_components(pruned, directed=False)
+    piece = np.flatnonzero(labels == int(np.argmax(np.bincount(labels, weights=weight))))
+    used = np.isin(node_of[inverse], piece)
+    if len(piece) < 3:
+        return PaintChain(nodes[piece].copy(), False, used)
+    nodes, weight = nodes[piece], weight[piece]
+    distances = distances[np.ix_(piece, piece)]
+    k = min(neighbours, len(nodes) - 1)
+    near = np.argpartition(distances, k, axis=1)[:, : k + 1].ravel()
+    rows = np.repeat(np.arange(len(nodes)), k + 1)
+    ok = (rows != near) & (distances[rows, near] <= 2.5 * typical)
+    links = csr_matrix((distances[rows[ok], near[ok]], (rows[ok], near[ok])), shape=distances.shape)
+    graph = csr_matrix(links.maximum(pruned[piece][:, piece]))
+    graph = csr_matrix(graph.maximum(graph.T))
+    a = int(np.argmax(_finite(dijkstra(graph, directed=False, indices=0))))
+    along = dijkstra(graph, directed=False, indices=a)
+    b = int(np.argmax(_finite(along)))
+    arcs = _loop_arcs(graph, nodes, distances, a, b, typical)
+    is_loop = arcs is not None
+    if arcs is not None:
+        along = _once_round(graph, a, arcs)
+    if not np.isfinite(along).all() or float(along.max()) <= 0.0:
+        return PaintChain(nodes[[a, b]], False, used)
+    chain = _slab_chain(nodes, along, weight, size)
+    members = points[used]
+    for _ in range(2):
+        if len(chain) < 2:
+            break
+        chain = _slab_chain(members, _positions_on(chain, members), np.ones(len(members)), size)
+    return PaintChain(chain, is_loop, used)
+
+
+def _finite(values: FloatArray) -> FloatArray:
+    return np.where(np.isfinite(values), values, -1.0)
+
+
+def _loop_arcs(
+    graph: csr_matrix,
+    nodes: FloatArray,
+    distances: FloatArray,
+    a: int,
+    b: int,
+    typical: float,
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_]] | None:
+    """The two arcs (node masks) of a loop between a and b, every node given to the nearer, or
+    None for a line: with the disks round a and b removed, fewer than two pieces of at least a
+    tenth of the nodes each touch both disks."""
+    radius = max(3.0 * typical, 2.0 * _band_half_width(nodes, distances, typical) + typical)
+    disk = (distances[a] <= radius) | (distances[b] <= radius)
+    rest = np.flatnonzero(~disk)
+    if len(rest) < 2:
+        return None
+    _, labels = connected_components(graph[rest][:, rest], directed=False)
+    sizes = np.bincount(labels)
+    near_a, near_b = distances[a] <= radius, distances[b] <= radius
+    touching = []
+    for label in np.argsort(-sizes, kind="stable")[:2]:
+        if sizes[label] < 0.1 * len(nodes):
+            continue
+        members = rest[labels == label]
+        linked = graph[members].nonzero()[1]
+        if near_a[linked].any() and near_b[linked].any():
+            touching.append(members)
+    if len(touching) < 2:
+        return None
+    d1 = dijkstra(graph, directed=False, indices=touching[0], min_only=True)
+    d2 = dijkstra(graph, directed=False, indices=touching[1], min_only=True)
+    first = d1 <= d2
+    return first, ~first
+
+
+def _once_round(
+    graph: csr_matrix, a: int, arcs: tuple[NDArray[np.bool_], NDArray[np.bool_]]
+) -> FloatArray:
+    """Geodesic distance from ``a`` round a loop cut next to ``a``: links between the two arcs
+    near ``a`` (closer to it than to anything halfway round) are removed."""
+    first, _ = arcs
+    coo = graph.tocoo()
+    from_a = dijkstra(graph, directed=False, indices=a)
+    half = 0.5 * float(np.max(_finite(from_a)))
+    across = (first[coo.row] != first[coo.col]) & (from_a[coo.row] < half)
+    cut = csr_matrix((coo.data[~across], (coo.row[~across], coo.col[~across])), shape=graph.shape)
+    return np.asarray(dijkstra(cut, directed=False, indices=a))
+
+
+def _band_half_width(nodes: FloatArray, distances: FloatArray, typical: float) -> float:
+    """The band's half width from the nodes' local spread: across a neighbourhood of four
+    typical links, the second principal standard deviation times sqrt(3) (a uniform band's),
+    the median over the nodes."""
+    near = distances <= 4.0 * typical
+    count = near.sum(axis=1)
+    centre = (near @ nodes) / count[:, None]
+    spreads = []
+    for i in np.flatnonzero(count >= 4):
+        local = nodes[near[i]] - centre[i]
+        eig = np.linalg.eigvalsh(local.T @ local / len(local))
+        spreads.append(float(np.sqrt(max(eig[1], 0.0))))
+    return float(np.sqrt(3.0) * np.median(spreads)) if spreads else typical
 
 
 def _slab_chain(

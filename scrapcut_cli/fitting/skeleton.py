@@ -33,6 +33,7 @@ a metre cube.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,10 +54,18 @@ from scrapcut_cli.fitting._common import (
     follows_input_order,
     moving_average,
 )
+from scrapcut_cli.fitting.closure import Closure, hermite_bridge, paint_end
 from scrapcut_cli.fitting.curve import Curve
 from scrapcut_cli.fitting.ends import check_end_trim, stroke_ends
 from scrapcut_cli.fitting.ordering import tree_diameter
-from scrapcut_cli.geometry import PolylineDistance, cumulative_length, resample_polyline
+from scrapcut_cli.geometry import (
+    PolylineDistance,
+    closed_polyline,
+    cumulative_length,
+    interpolate_polyline,
+    resample_loop,
+    resample_polyline,
+)
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -94,7 +103,12 @@ class _Thinning:
     retries: int
 
 
-def fit_skeleton(points_base: ArrayLike, *, config: SkeletonConfig | None = None) -> Curve:
+def fit_skeleton(
+    points_base: ArrayLike,
+    *,
+    config: SkeletonConfig | None = None,
+    closure: Closure | None = None,
+) -> Curve:
     """Fit the painted line's centre by 3-D skeletonisation of the voxelised paint.
 
     Parameters
@@ -167,6 +181,36 @@ def fit_skeleton(points_base: ArrayLike, *, config: SkeletonConfig | None = None
         )
     path = thinning.skeleton[order].astype(np.float64) * leaf
     paint = x[inside]
+    if closure is not None and closure.closed:
+        centre, how = _closed_centre(thinning.skeleton, path, paint, frame, closure, config)
+        polyline = resample_loop(centre, config.sample_spacing_m)
+        dist, _ = arc_positions(closed_polyline(polyline), x, step=0.00025)
+        near = dist[inside]
+        return Curve(
+            points=frame.to_base(polyline),
+            method="skeleton",
+            spacing_m=config.sample_spacing_m,
+            closed=True,
+            info={
+                "leaf_size_m": leaf,
+                "pieces": 1,
+                "stray_pieces": int(n_pieces - 1),
+                "stray_points": int((~inside).sum()),
+                "voxels": len(occupied),
+                "closed_voxels": len(closed),
+                "skeleton_voxels": len(thinning.skeleton),
+                "pruned_branches": pruned,
+                "thinning_retries": thinning.retries,
+                "blocks": thinning.blocks,
+                "largest_dense_voxels": thinning.largest_dense_voxels,
+                "loop_from": how,
+                "rms_m": float(np.sqrt(np.mean(near**2))),
+                "max_residual_m": float(near.max()),
+                "median_residual_m": float(np.median(near)),
+                "length_m": float(cumulative_length(closed_polyline(polyline))[-1]),
+                "points": len(pts),
+            },
+        )
 
     # Smooth the voxel path over a window first: paint beside a stair step would all project
     # onto its corner, and at a fine leaf size the skeleton of a holey band wanders across it.
@@ -625,3 +669,155 @@ def _centre_vertices(path: FloatArray, centre: FloatArray) -> FloatArray:
     _, nearest, u = PolylineDistance(centre).query(path)
     inside = (u > 0.0) & (u < len(centre) - 1)
     return np.asarray(nearest[inside] if inside.sum() >= 2 else nearest)
+
+
+# --------------------------------------------------------------------------- closed lines
+
+
+def _closed_centre(
+    skeleton: IntArray,
+    path: FloatArray,
+    paint: FloatArray,
+    frame: CanonicalFrame,
+    closure: Closure,
+    config: SkeletonConfig,
+) -> tuple[FloatArray, str]:
+    """The centre of a closed line's paint, as a loop's vertices (K, 3), canonical frame, and
+    where the loop came from: ``cycle`` (the skeleton's own cycle round paint seen all round)
+    or ``path+bridge`` (its longest path, centred as an open line's, closed across the gap by
+    the cubic that continues both ends). Oriented and started as the closure's chain."""
+    leaf = float(config.leaf_size_m)
+    chain = frame.to_local(closure.chain)
+    loop_length = float(cumulative_length(closed_polyline(frame.to_local(closure.loop)))[-1])
+    cycle = _largest_cycle(skeleton, min_length=0.5 * loop_length / leaf)
+    window = _window(moving_average(path, 3), paint, config)
+    reach = max(3.0 * leaf, 2.0 * window)
+
+    def centre_on_paint(polyline: FloatArray) -> FloatArray:
+        return _centre_on_paint(
+            polyline,
+            paint,
+            window=window,
+            radius=config.refine_radius_m,
+            corner_reach=reach,
+            corner_angle=float(np.radians(config.corner_angle_deg)),
+            smoothing=int(config.smoothing_window),
+        )
+
+    if cycle is not None:
+        loop = skeleton[cycle].astype(np.float64) * leaf
+        stations = resample_loop(loop, _STATION_M)
+        half = round(window / _STATION_M)
+        centre = _loop_average(stations, 2 * half + 1)
+        for _ in range(int(config.refine_iterations)):
+            centre = _centre_loop(centre, centre_on_paint, pad=window + 2.0 * reach)
+        return _as_chain(centre, chain), "cycle"
+    if float(np.dot(path[-1] - path[0], chain[-1] - chain[0])) < 0.0 and (
+        np.linalg.norm(path[0] - chain[-1]) < np.linalg.norm(path[0] - chain[0])
+    ):
+        path = path[::-1]
+    stations = resample_polyline(path, _STATION_M)
+    centre = moving_average(stations, 2 * round(window / _STATION_M) + 1)
+    centre = _extend_to_data(_trim(centre, window), paint, config, span=window)
+    for _ in range(int(config.refine_iterations)):
+        centre = _extend_to_data(centre_on_paint(centre), paint, config, span=window)
+    if np.linalg.norm(centre[0] - chain[0]) > np.linalg.norm(centre[0] - chain[-1]):
+        centre = centre[::-1]
+    # The centre is cut where the paint ends, then closed across the gap.
+    band = closure.half_width_m
+    end_tip, end_out = paint_end(centre, paint, half_width_m=band)
+    start_tip, start_out = paint_end(centre[::-1], paint, half_width_m=band)
+    s = cumulative_length(centre)
+    first = -float(np.dot(start_tip - centre[0], start_out))  # > 0: the paint ends inside
+    last = float(s[-1]) + float(np.dot(end_tip - centre[-1], end_out))
+    keep = (s > first + 1e-6) & (s < last - 1e-6)
+    centre = np.vstack([start_tip, centre[keep], end_tip])
+    bridge = hermite_bridge(end_tip, end_out, start_tip, start_out, spacing=_STATION_M)
+    return np.vstack([centre, bridge[1:-1]]), "path+bridge"
+
+
+def _largest_cycle(skeleton: IntArray, *, min_length: float) -> IntArray | None:
+    """Indices into ``skeleton`` (S, 3) round its longest cycle, if one is at least
+    ``min_length`` voxels long; else None.
+
+    Every cycle of the 26-neighbour graph closes through a link its spanning tree leaves out;
+    the one whose tree path between its two voxels is longest is the loop of the line (the
+    many small triangles of diagonal neighbours and the cycles round holes in the paint are
+    short).
+    """
+    from scipy.sparse.csgraph import dijkstra
+
+    packed = _pack(skeleton)
+    order = np.argsort(packed)
+    keys = packed[order]
+    i, j, w = _neighbour_edges(keys)
+    n = len(keys)
+    graph = csr_matrix((w, (i, j)), shape=(n, n))
+    graph = (graph + graph.T).tocsr()
+    tree = minimum_spanning_tree(graph)
+    tree = (tree + tree.T).tocsr()
+    in_tree = set(zip(*tree.nonzero(), strict=True))
+    extra = [(a, b) for a, b in zip(i.tolist(), j.tolist(), strict=True) if (a, b) not in in_tree]
+    if not extra:
+        return None
+    sources = np.unique([a for a, _ in extra])
+    dist, pred = dijkstra(tree, directed=False, indices=sources, return_predecessors=True)
+    row = {int(src): k for k, src in enumerate(sources)}
+    best, best_len = None, float(min_length)
+    for a, b in extra:
+        length = float(dist[row[a], b]) + float(graph[a, b])
+        if length > best_len:
+            best, best_len = (a, b), length
+    if best is None:
+        return None
+    a, b = best
+    cycle = [b]
+    while cycle[-1] != a:
+        cycle.append(int(pred[row[a], cycle[-1]]))
+    return np.asarray(order[np.asarray(cycle[::-1])], dtype=np.int64)
+
+
+def _loop_average(points: FloatArray, window: int) -> FloatArray:
+    """:func:`moving_average` round a loop's vertices (K, 3)."""
+    half = max(int(window) // 2, 0)
+    if half == 0 or len(points) < 3:
+        return points.copy()
+    half = min(half, len(points) - 1)
+    padded = np.vstack([points[-half:], points, points[:half]])
+    return np.asarray(moving_average(padded, 2 * half + 1)[half:-half])
+
+
+def _centre_loop(
+    loop: FloatArray, centre_on_paint: Callable[[FloatArray], FloatArray], *, pad: float
+) -> FloatArray:
+    """One ``centre_on_paint`` (:func:`_centre_on_paint`) round a loop (K, 3), in two open
+    halves: each half runs
+    ``pad`` metres past its ends (no stretch of the loop appears twice in one half, so every
+    paint point has one place on it), is centred as an open line, and gives back its own half
+    between the centred images of its ends."""
+    stations = resample_loop(loop, _STATION_M)
+    k = len(stations)
+    m = min(int(np.ceil(pad / _STATION_M)), max(k // 4 - 1, 1))
+    halves = []
+    for first, last in ((0, k // 2), (k // 2, k)):
+        idx = np.arange(first - m, last + m + 1) % k
+        centred = centre_on_paint(stations[idx])
+        ends = stations[[first % k, last % k]]
+        u = PolylineDistance(centred).query(ends)[2]
+        s = cumulative_length(centred)
+        a, b = np.interp(u, np.arange(len(centred)), s)
+        keep = (s > a) & (s < b)
+        halves.append(np.vstack([interpolate_polyline(centred, [a], cumulative=s), centred[keep]]))
+    return np.asarray(np.vstack(halves))
+
+
+def _as_chain(loop: FloatArray, chain: FloatArray) -> FloatArray:
+    """The loop (K, 3) started at its vertex nearest the chain's first point and running the
+    chain's way."""
+    start = int(np.argmin(np.linalg.norm(loop - chain[0], axis=1)))
+    loop = np.roll(loop, -start, axis=0)
+    ahead = chain[min(len(chain) - 1, max(1, len(chain) // 8))]
+    k = max(1, len(loop) // 8)
+    if np.linalg.norm(loop[-k] - ahead) < np.linalg.norm(loop[k] - ahead):
+        loop = np.roll(loop[::-1], 1, axis=0)
+    return loop

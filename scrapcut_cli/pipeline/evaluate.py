@@ -38,6 +38,23 @@ SKIPPED = "error not computed (--no-eval)"
 COMPUTED = "computed"
 #: The figures a summary prints (millimetres; coverage a share 0–1).
 SUMMARY_KEYS = ("mean_mm", "sd_mm", "min_mm", "max_mm", "coverage", "reverse_max_mm")
+#: And against a closed reference: the observed arcs' figures and the unobserved arcs'.
+LOOP_SUMMARY_KEYS = (
+    "closed",
+    "observed_mean_mm",
+    "observed_max_mm",
+    "observed_coverage",
+    "observed_share",
+    "observed_from",
+    "unobserved_arcs",
+    "unobserved_true_arcs",
+    "unobserved_reported_mm",
+    "unobserved_true_mm",
+    "unobserved_extent_error_mm",
+    "unobserved_arcs_missed",
+    "unobserved_flagged_on_arcs",
+    "unobserved_flagged_elsewhere",
+)
 
 
 def error_report_paths(path_file: str | Path) -> tuple[Path, Path]:
@@ -67,9 +84,13 @@ class ErrorReport:
         return None if self.row is None else self.row.figures_mm()
 
     def summary(self) -> dict[str, Any] | None:
-        """mean, SD, min, max, coverage and reverse max — what a command's summary prints."""
+        """mean, SD, min, max, coverage and reverse max — what a command's summary prints
+        (and, against a closed reference, :data:`LOOP_SUMMARY_KEYS`)."""
         figures = self.figures_mm()
-        return None if figures is None else {k: figures[k] for k in SUMMARY_KEYS}
+        if figures is None:
+            return None
+        keys = SUMMARY_KEYS + (LOOP_SUMMARY_KEYS if figures.get("closed") else ())
+        return {k: figures[k] for k in keys if k in figures}
 
     def record(self, path_file: str | Path) -> dict[str, Any]:
         """The ``PATH.error.json`` object: an ``eval --format json`` row plus provenance."""
@@ -98,11 +119,16 @@ def error_text(figures: dict[str, Any] | None, status: str) -> str:
     if figures is None:
         return status
     f = figures
-    return (
+    text = (
         f"mean {f['mean_mm']:.2f} mm, SD {f['sd_mm']:.2f}, min {f['min_mm']:.2f}, max "
         f"{f['max_mm']:.2f} mm; coverage {100 * f['coverage']:.1f} %; reverse max "
         f"{f['reverse_max_mm']:.2f} mm"
     )
+    if f.get("closed"):
+        from scrapcut_cli.evaluation.sources import loop_summary
+
+        text += "; " + loop_summary(f)
+    return text
 
 
 def find_reference(

@@ -3,7 +3,7 @@
 :func:`stitch_recording_file` reads a recording (through :mod:`scrapcut_cli.recording`) and
 stitches its paint and surface (:func:`~scrapcut_cli.perception.stitch.stitch_recording`) into a
 :class:`StitchedRecording`; :func:`fit_stitched` fits the curve
-(:func:`~scrapcut_cli.fitting.fit_curve`) and makes the cutting path
+(:func:`~scrapcut_cli.fitting.fit_line`: open or closed) and makes the cutting path
 (:func:`~scrapcut_cli.toolpath.setpoints.make_cutting_path`) into a :class:`FitResult` that knows
 how to become a path file. Split in two so that one stitched recording serves several methods (a
 sweep in ``reproduce``) and an exploration replay can start from the planner's own clouds.
@@ -90,7 +90,7 @@ class FitResult:
 
         The same measure for both methods; it includes the paint band's own half width.
         """
-        d = PolylineDistance(self.curve.points).distance(self.stitch.paint_points)
+        d = PolylineDistance(self.curve.polyline).distance(self.stitch.paint_points)
         return float(np.sqrt(np.mean(d * d))), float(d.max())
 
     def to_path_dict(self, *, created: str | None = None) -> dict[str, Any]:
@@ -134,6 +134,10 @@ class FitResult:
             "tilted": info.get("tilted", 0),
             "collision": info.get("collision", 0),
             "no_surface": info.get("no_surface", 0),
+            "closed": bool(self.curve.closed),
+            "unobserved": info.get("unobserved", 0),
+            "unobserved_arcs": list(info.get("unobserved_arcs", [])),  # type: ignore[call-overload]
+            "loop": info.get("loop"),
             "fit_rms_m": rms,
             "fit_max_m": worst,
             "fitter_info": _scalars(self.curve.info),
@@ -246,7 +250,7 @@ def fit_stitched(
     speeds: SpeedTable | None = None,
 ) -> FitResult:
     """Fit the curve to stitched paint and make the cutting path on the stitched surface."""
-    from scrapcut_cli.fitting import fit_curve
+    from scrapcut_cli.fitting import fit_line
 
     if method not in METHODS:
         raise ToolpathError(f"unknown fitting method {method!r}; known: {', '.join(METHODS)}")
@@ -254,7 +258,7 @@ def fit_stitched(
     if speeds is None:
         speeds = load_speed_table(config.toolpath.speed_table)
     t0 = time.perf_counter()
-    curve = fit_curve(stitch.paint_points, method, config)
+    curve = fit_line(stitch.paint_points, stitch.surface_points, method, config)
     t1 = time.perf_counter()
     # Paint lies on the surface too: both clouds give normals and both can hit the torch.
     surface = np.vstack([stitch.surface_points, stitch.paint_points])

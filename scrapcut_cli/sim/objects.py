@@ -12,6 +12,10 @@ on curved pieces a guide curve is projected onto the mesh by ray casting (open3d
 ``RaycastingScene``). The basket's line is drawn on the envelope over its wires — what a worker
 sprays across a wire mesh — so paint lands only where wires are.
 
+Two pieces carry closed lines (``ScrapObject.closed``): a ring around a pipe lying on two
+supports (the part under the pipe no camera can see) and a round cut-out drawn on a plate. A
+closed reference does not repeat its first point; :attr:`ScrapObject.painted_line` closes it.
+
 Sizes are typical of yard scrap (pipe DN150, IPE-300-like beam, a 260 mm air receiver) and were
 chosen so every view of the sweep is reachable by the Panda without collision.
 """
@@ -68,6 +72,9 @@ class ScrapObject:
         Placement of the piece's own frame in the base frame.
     seed : int
         Seeds the piece's rust pattern (the geometry is fixed).
+    closed : bool
+        The line is a loop: ``reference`` runs once around it and does not repeat its first
+        point (the last point joins the first).
     """
 
     name: str
@@ -79,14 +86,24 @@ class ScrapObject:
     material: MetalFinish
     T_base_object: FloatArray
     seed: int = 0
+    closed: bool = False
 
     @property
     def mesh(self) -> TriMesh:
         return TriMesh(self.vertices, self.faces)
 
     @property
+    def painted_line(self) -> FloatArray:
+        """The reference as a polyline to paint along (N, 3) or (N + 1, 3): a closed line
+        with its first point repeated at the end."""
+        if self.closed:
+            return np.asarray(np.vstack([self.reference, self.reference[:1]]))
+        return self.reference
+
+    @property
     def reference_length_m(self) -> float:
-        return polyline_length(self.reference)
+        """Length of the line, the closing segment of a loop included."""
+        return polyline_length(self.painted_line)
 
     @property
     def centre(self) -> FloatArray:
@@ -101,6 +118,7 @@ class _Built:
     reference: FloatArray
     material: MetalFinish
     painted_surface: TriMesh | None = None  # where the line was drawn, if not the mesh
+    closed: bool = False  # the reference is a loop (its last point joins its first)
 
 
 _STEEL = MetalFinish()
@@ -361,6 +379,68 @@ def _planar_box() -> _Built:
     return _Built(mesh, reference, MetalFinish(rust_fraction=0.20))
 
 
+def _pipe_ring() -> _Built:
+    """A DN150-like pipe (outer radius 80 mm, 6 mm wall, 500 mm long) lying along x on two
+    sleepers 40 mm high, with a ring painted all the way round it between them: the cut that
+    divides a pipe into sections. The quarter or so of the ring under the pipe faces the floor
+    from 40 mm up; no camera on the arm sees it.
+
+    The ring is drawn by hand: it wanders along the pipe by a few millimetres as it goes round.
+    It starts at the top and runs towards -y (down the side nearer the robot's right).
+    """
+    radius, wall, length = 0.08, 0.006, 0.50
+    lift, sleeper_x, sleeper_half = 0.04, 0.20, (0.04, 0.09)
+    axis_z = lift + radius
+    pipe = _tube(radius, wall, length, segments=128).transformed(
+        frame_from_axis((0.0, 0.0, axis_z), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0))
+    )
+    sleepers = [
+        box(
+            (x - sleeper_half[0], -sleeper_half[1], 0.0),
+            (x + sleeper_half[0], sleeper_half[1], lift),
+        )
+        for x in (-sleeper_x, sleeper_x)
+    ]
+    mesh = merge([pipe, *sleepers])
+    theta = 2.0 * np.pi * _samples(2.0 * np.pi * radius)[:-1]  # the loop, once round
+    x = 0.004 * np.sin(theta) + 0.003 * np.sin(2.0 * theta + 0.7)
+    radial = np.column_stack([np.zeros_like(theta), -np.sin(theta), np.cos(theta)])
+    axis_points = np.column_stack([x, np.zeros_like(theta), np.full_like(theta, axis_z)])
+    reference = _project(pipe, axis_points + 0.12 * radial, -radial, "pipe_ring")
+    return _Built(mesh, reference, MetalFinish(rust_fraction=0.35), closed=True)
+
+
+def _plate_hole() -> _Built:
+    """A 12 mm plate (420 x 320 mm) resting on two flat bars of different heights (a 7 degree
+    slope down towards the robot), with a round cut-out (about 150 mm across) drawn on it by
+    hand: its radius wanders by a couple of millimetres. The line starts on the side nearest
+    the robot and runs counter-clockwise seen from above.
+    """
+    half_x, half_y, thick = 0.21, 0.16, 0.012
+    low, high, bar_x = 0.03, 0.07, 0.17
+    slope = np.arctan2(high - low, 2.0 * bar_x)
+    centre_z = 0.5 * (low + high)
+    plate = box((-half_x, -half_y, 0.0), (half_x, half_y, thick))
+    c, s = np.cos(slope), np.sin(slope)
+    T = np.eye(4)
+    T[:3, :3] = [[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]]  # +x end up
+    T[:3, 3] = (0.0, 0.0, centre_z)
+    bars = [
+        box((x - 0.015, -half_y, 0.0), (x + 0.015, half_y, z - 0.002))
+        for x, z in ((-bar_x, low), (bar_x, high))
+    ]
+    mesh = merge([plate.transformed(T), *bars])
+    theta = 2.0 * np.pi * _samples(2.0 * np.pi * 0.075)[:-1]
+    r = 0.075 + 0.0015 * np.sin(3.0 * theta + 0.4) + 0.001 * np.sin(5.0 * theta)
+    local = np.column_stack(
+        [0.02 - r * np.cos(theta), -r * np.sin(theta), np.full_like(theta, thick + 0.05)]
+    )
+    above = local @ T[:3, :3].T + T[:3, 3]
+    down = np.tile(-T[:3, 2], (len(theta), 1))
+    reference = _project(mesh, above, down, "plate_hole")
+    return _Built(mesh, reference, MetalFinish(rust_fraction=0.25), closed=True)
+
+
 _CATALOGUE: dict[str, tuple[str, Callable[[], _Built]]] = {
     "cylinder": ("pipe, 160 mm; the line winds over it (the paper's simple case)", _cylinder),
     "i_beam": ("I-beam on its side; flange -> web -> flange, two ~90 degree turns", _i_beam),
@@ -372,13 +452,20 @@ _CATALOGUE: dict[str, tuple[str, Callable[[], _Built]]] = {
     ),
     "slanted": ("two faces at a sharp ridge; the line crosses it (self-occlusion)", _slanted),
     "planar_box": ("box; the line crosses the top and turns down a side face", _planar_box),
+    "pipe_ring": (
+        "pipe on two sleepers; a ring painted all round it (closed; the underside unseen)",
+        _pipe_ring,
+    ),
+    "plate_hole": ("sloping plate; a round cut-out drawn on it (closed)", _plate_hole),
 }
 
 
 #: Where along its line (0-1) explore mode starts, i.e. where the worker points the robot. The
 #: middle, except on the slanted piece: its middle is the ridge, where both faces are in view;
 #: starting on one face is the paper's real-robot case, where exploration stopped at the edge.
-EXPLORE_START_FRACTION: dict[str, float] = {"slanted": 0.2}
+#: A ring around a pipe is started at its top (its reference starts there), a cut-out on its
+#: side nearest the robot.
+EXPLORE_START_FRACTION: dict[str, float] = {"slanted": 0.2, "pipe_ring": 0.0, "plate_hole": 0.0}
 
 
 def explore_start_fraction(name: str) -> float:
@@ -410,9 +497,12 @@ def make_object(name: str, *, seed: int = 0, placement: ArrayLike | None = None)
     built = builder()
     mesh = built.mesh.transformed(T)
     reference = built.reference @ T[:3, :3].T + T[:3, 3]
-    # Drop repeated vertices (a projected guide can land twice on the same spot).
+    # Drop repeated vertices (a projected guide can land twice on the same spot), and a loop's
+    # last point if it lands on its first.
     keep = np.concatenate([[True], np.diff(cumulative_length(reference)) > 1e-9])
     reference = reference[keep]
+    if built.closed and np.linalg.norm(reference[-1] - reference[0]) <= 1e-9:
+        reference = reference[:-1]
     painted = built.painted_surface.transformed(T) if built.painted_surface else mesh
     return ScrapObject(
         name=name,
@@ -424,4 +514,5 @@ def make_object(name: str, *, seed: int = 0, placement: ArrayLike | None = None)
         material=built.material,
         T_base_object=T,
         seed=int(seed),
+        closed=built.closed,
     )

@@ -34,7 +34,11 @@ What is written (DESIGN.md, realsense-ros 4.x names)
 * ``/scrapcut/reference`` (nav_msgs/Path, panda_link0), ``/scrapcut/exploration``
   (std_msgs/String JSON per decision, explore mode only).
 * MCAP metadata ``scrapcut`` (object, mode, noise, paint, stroke_width_m, seed, tool_version,
-  params = JSON of everything used) and ``scrapcut_result`` (counts of this run).
+  params = JSON of everything used) and ``scrapcut_result`` (counts of this run); for a closed
+  line also ``scrapcut_reference``: ``closed`` ("true") and ``unseen_arcs`` (JSON list of
+  [start, end] metres along the reference from its first point, wrapping when end < start: the
+  stretches no captured image showed, ``sim.visibility``), the truth ``scrapcut eval`` scores
+  reported unobserved arcs against.
 
 Image header stamps are the capture time plus the camera's clock offset (``yard``: 10–20 ms
 either way; 0 otherwise; ``SimConfig.stamp_offset_s``), /tf stamps the robot's time; the
@@ -106,6 +110,7 @@ from scrapcut_cli.sim.robot import (
     joint_names,
 )
 from scrapcut_cli.sim.surface import OVERSPRAY_PRESETS, PaintStroke
+from scrapcut_cli.sim.visibility import LineVisibility
 
 FloatArray = NDArray[np.float64]
 
@@ -315,7 +320,7 @@ def record(
     )
     overspray = OVERSPRAY_PRESETS[preset.overspray]
     stroke = PaintStroke(
-        obj.reference,
+        obj.painted_line,
         width_m=config.stroke_width_m,
         rgb=PAINT_PRESETS[config.paint].rgb,
         overspray=overspray,
@@ -345,6 +350,8 @@ def record(
             stamp_offset_ns=round(stamp_offset_s * 1e9),
             motion_frames_hz=motion_hz,
         )
+        if obj.closed:
+            session.visibility = LineVisibility(stroke, closed=True)
         params = _params(config, preset, camera, T_hand_camlink_true, limits, stroke)
         params["truth"] = _truth(robot, stamp_offset_s, motion_hz)
         active: ViewPlanner
@@ -397,6 +404,8 @@ def record(
             moving_frames=session.moving_frames,
         )
         writer.add_metadata("scrapcut_result", _result_metadata(result))
+        if session.visibility is not None:
+            writer.add_metadata("scrapcut_reference", _reference_metadata(session.visibility))
     return dataclasses.replace(result, wall_time_s=time.perf_counter() - wall_start)
 
 
@@ -467,6 +476,7 @@ class _Session:
         self.motion_frames_hz = float(motion_frames_hz)
         self.moving_frames = 0
         self._moves = 0
+        self.visibility: LineVisibility | None = None  # truth of what the images showed
 
     # ------------------------------------------------------------------ message queue
 
@@ -690,6 +700,8 @@ class _Session:
             stamp = first + round(k * FRAME_PERIOD_S * 1e9) + self.stamp_offset_ns
             rng = _rng(cfg.seed, _STREAM_SENSOR, view, k)
             depth_m = simulate_depth(rendered.depth, rendered.cos_incidence, self.preset, rng)
+            if self.visibility is not None:
+                self.visibility.add(rendered, depth_m)
             color = simulate_color(rendered.color, self.preset, rng)
             depth_msg, depth_read = _encode_depth(depth_m, cfg.depth_encoding)
             self._write_images(stamp, color, depth_msg)
@@ -733,6 +745,8 @@ class _Session:
             rendered = self.renderer.render(T_true, self.camera, lighting=lighting)
             rng = _rng(cfg.seed, _STREAM_SENSOR, 100_000 + move, k)
             depth_m = simulate_depth(rendered.depth, rendered.cos_incidence, self.preset, rng)
+            if self.visibility is not None:
+                self.visibility.add(rendered, depth_m)  # a reader may stitch these too
             color = simulate_color(rendered.color, self.preset, rng)
             depth_msg, _ = _encode_depth(depth_m, cfg.depth_encoding)
             self._write_images(capture + self.stamp_offset_ns, color, depth_msg)
@@ -905,6 +919,15 @@ def _metadata(config: SimConfig, params: dict[str, Any]) -> dict[str, str]:
         "seed": str(config.seed),
         "tool_version": __version__,
         "params": json.dumps(_strict_json(params), sort_keys=True, allow_nan=False),
+    }
+
+
+def _reference_metadata(visibility: LineVisibility) -> dict[str, str]:
+    arcs = [[round(a, 6), round(b, 6)] for a, b in visibility.unseen_arcs()]
+    return {
+        "closed": "true" if visibility.closed else "false",
+        "length_m": repr(round(visibility.length_m, 9)),
+        "unseen_arcs": json.dumps(arcs),
     }
 
 

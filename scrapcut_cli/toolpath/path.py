@@ -33,6 +33,9 @@ class CuttingPath:
         Time stamps, s, from the start of the pierce.
     flags : list of list of str
         Per set-point flags, e.g. ``["tilted"]`` or ``["collision"]``.
+    segments : list of str
+        Per set-point part of the cut: ``cut``, or on a loop ``lead_in`` (from the pierce onto
+        the line) and ``overlap`` (past the start, closing the kerf). Empty: all ``cut``.
     """
 
     positions: NDArray[np.float64]
@@ -46,6 +49,7 @@ class CuttingPath:
     standoff_m: float
     spacing_m: float
     info: dict[str, object] = field(default_factory=dict)
+    segments: list[str] = field(default_factory=list)
 
     def __len__(self) -> int:
         return len(self.positions)

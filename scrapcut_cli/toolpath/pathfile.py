@@ -70,6 +70,7 @@ def path_to_dict(
             "t_s": float(path.time[i]),
             "flags": [str(f) for f in path.flags[i]],
             "surface_point": _floats(path.surface_points[i]),
+            **({"segment": path.segments[i]} if path.segments else {}),
         }
         for i in range(len(path))
     ]
@@ -86,6 +87,7 @@ def path_to_dict(
             "nurbs": None if curve.nurbs is None else curve.nurbs.to_dict(),
             "spacing_m": float(curve.spacing_m),
             "length_m": float(curve.length),
+            "closed": bool(curve.closed),
             "info": _jsonable(dict(curve.info)),
         },
         "path": {
@@ -131,12 +133,16 @@ def path_from_dict(data: Any) -> tuple[Curve, CuttingPath, dict[str, Any]]:
     if spacing is None:
         spacing = polyline_length(points) / max(len(points) - 1, 1)
     curve_info = curve_d.get("info") or {}
+    closed = curve_d.get("closed", False)
+    if not isinstance(closed, bool):
+        raise ToolpathError("path file: curve.closed must be true or false")
     curve = Curve(
         points=points,
         method=name,
         nurbs=nurbs,
         spacing_m=_number(spacing, "curve.spacing_m"),
         info=dict(curve_info) if isinstance(curve_info, dict) else {},
+        closed=closed,
     )
 
     path_d = _get(data, "path", dict)
@@ -177,6 +183,9 @@ def path_from_dict(data: Any) -> tuple[Curve, CuttingPath, dict[str, Any]]:
         # The jet hits the surface standoff metres along the torch z axis from the tip.
         z_axes = quat_xyzw_to_matrix(orientations)[:, :, 2] if len(setpoints) else positions
         surface_points = positions + standoff * z_axes
+    segments = [sp.get("segment", "cut") for sp in setpoints]
+    if not all(isinstance(g, str) for g in segments):
+        raise ToolpathError("path file: path.setpoints[*].segment must be a string")
     summary = path_d.get("summary") or {}
     path = CuttingPath(
         positions=positions,
@@ -190,6 +199,7 @@ def path_from_dict(data: Any) -> tuple[Curve, CuttingPath, dict[str, Any]]:
         standoff_m=standoff,
         spacing_m=path_spacing,
         info=dict(summary) if isinstance(summary, dict) else {},
+        segments=segments if any(g != "cut" for g in segments) else [],
     )
     meta = {k: v for k, v in data.items() if k not in ("curve", "path")}
     return curve, path, meta

@@ -19,6 +19,9 @@ look-up table of the scrap's properties. :func:`make_cutting_path` does it in th
 6. how the cut starts and finishes (:mod:`~scrapcut_cli.toolpath.ends`): at an edge the line
    reaches (preheat there, no pierce; the path is cut backwards when only its far end reaches
    one) and with a run-out past a far edge; the summary's ``ends`` says what and why.
+
+A closed curve (a ring, a cut-out) is cut by :mod:`~scrapcut_cli.toolpath.loop` instead: a
+pierce and lead-in, once round, an overlap past the start (no edge start, no run-out).
 """
 
 from __future__ import annotations
@@ -78,6 +81,10 @@ def make_cutting_path(
         Set-points in cutting order (along the curve, or against it when only its far end
         reaches an edge); ``info`` counts flags, holds the timing figures and the ``ends``.
     """
+    if curve.closed:
+        from scrapcut_cli.toolpath.loop import make_loop_path
+
+        return make_loop_path(curve, surface_base, surface_viewpoints, config=config, speeds=speeds)
     return _cutting_path(curve, surface_base, surface_viewpoints, config=config, speeds=speeds)
 
 
@@ -306,6 +313,11 @@ def cutting_times(
     seg_speed = np.minimum(speed[1:], speed[:-1])
     time = pierce + np.concatenate([[0.0], np.cumsum(seg / seg_speed)])
     return np.asarray(speed, dtype=np.float64), time
+
+
+def points_array(values: ArrayLike, name: str) -> FloatArray:
+    """``values`` as a finite (N, 3) float64 array; ToolpathError naming ``name`` otherwise."""
+    return _points(values, name)
 
 
 def _points(values: ArrayLike, name: str) -> FloatArray:
