@@ -156,7 +156,7 @@ def test_eval_scores_a_loop_path_against_a_closed_csv(tmp_path: Path) -> None:
         catch_exceptions=False,
     )
     assert result.exit_code == 0, result.output
-    (row,) = json.loads(result.stdout)
+    (row,) = json.loads(result.stdout)["rows"]
     assert row["closed"] is True and row["coverage"] == 1.0
     assert abs(row["mean_mm"] - 0.6) < 0.05
     assert row["observed_from"] == "all" and row["observed_share"] == 1.0
