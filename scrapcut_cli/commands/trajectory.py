@@ -224,7 +224,8 @@ def _render(summary: dict[str, Any], path_file: Path) -> None:
             "collisions",
             f"{summary['trajectory_collisions']} of {summary['points']} points; observed surface: "
             f"{summary['observed_surface']} ({summary['observed_points']} points, "
-            f"{summary['unseen_voxels']} unseen voxels near the piece avoided)",
+            f"{summary['unseen_voxels']} unseen voxels near the piece avoided); "
+            f"{summary['transits_around_obstacles']} move(s) between cuts around obstacles",
         ),
         ("robot base", summary["robot_base"]),
         ("time", f"{summary['time_s']['total']:.2f} s (plan {summary['time_s']['plan']:.2f} s)"),
