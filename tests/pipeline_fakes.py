@@ -1,5 +1,6 @@
 """A stand-in for reproduce's simulated scan: rows whose curves lie a known distance off a
-straight reference (seed s: s + 1 mm), so reports over seeds have figures known in advance."""
+straight reference (seed s: s + 1 mm; self-calibrated rows a tenth of that), so reports over
+seeds have figures known in advance."""
 
 from __future__ import annotations
 
@@ -20,5 +21,11 @@ def fake_scan(task: ScanTask) -> ScanRun:
                   extras={"seed": task.seed})
         for method in task.methods
     ]  # fmt: skip
+    if task.self_calibrate:  # self-calibrated rows a tenth as far off
+        rows += [
+            ReportRow(task.object, method, path_error(REFERENCE + offset / 10, REFERENCE),
+                      extras={"seed": task.seed}, self_calibrated=True)
+            for method in task.methods
+        ]  # fmt: skip
     summary = {"recording": f"recordings/{task.stem}.mcap", "seed": task.seed, "views": 3}
     return ScanRun(task, rows, [], summary, {"record": 0.1})

@@ -106,6 +106,35 @@ def test_fit_self_calibrated_lands_on_the_paint_and_records_the_calibration(
     assert record["time_offset_s"] == data["time_offset_s"]
 
 
+def test_reproduces_self_calibrated_rows_are_fits_of_the_scan_posed_with_its_calibration(
+    scan: tuple[Path, CalibrationScan], tmp_path: Path
+) -> None:
+    """What ``reproduce --self-calibrate`` adds to each scan: the same job as
+    ``fit --self-calibrate``, its row marked, the correction among the row's figures."""
+    from scrapcut_cli.config import ScrapcutConfig
+    from scrapcut_cli.pipeline.reproduce import ScanTask, _self_calibrated_rows
+
+    path, truth = scan
+    (tmp_path / "paths").mkdir()
+    config = ScrapcutConfig()
+    task = ScanTask("synthetic_cylinder", 0, ("nurbs",), config.to_dict(), str(tmp_path),
+                    "scan", self_calibrate=True)  # fmt: skip
+    timings: dict[str, float] = {}
+    (row,) = _self_calibrated_rows(task, config, path, timings)
+    assert row.self_calibrated and row.label == "nurbs, self-calibrated"
+    assert row.note == "calibration corrected"
+    assert row.error is not None and row.error.mean_m < 0.0011  # 1.8 mm with the published one
+    assert row.extras["calibration_clock_ms"] == pytest.approx(
+        1000.0 * truth.true_time_offset_s, abs=2.0
+    )
+    # The injected translation is (1.2, -0.6, 0.8) mm: 1.56 mm long.
+    assert row.extras["calibration_translation_mm"] == pytest.approx(1.56, abs=0.5)
+    assert row.source == "paths/synthetic_cylinder_nurbs_selfcal.json"
+    written = read_path_file(tmp_path / row.source)[2]
+    assert written["calibration"]["origin"] == "self-calibrate"
+    assert set(timings) == {"self_calibrate", "fit_selfcal_nurbs"}
+
+
 def test_stitch_and_filter_take_a_calibration(
     scan: tuple[Path, CalibrationScan],
     calibrated: tuple[dict[str, object], Path],

@@ -198,6 +198,39 @@ def test_oracle_rows_are_labelled_in_every_rendering() -> None:
     assert line["oracle_views"] == "True"
 
 
+def test_self_calibrated_rows_are_labelled_and_kept_apart_from_the_plain_ones() -> None:
+    from dataclasses import replace
+
+    from scrapcut_cli.evaluation.report import aggregate_records, aggregate_rows
+
+    plain = [offset_row("cylinder", "nurbs", mm) for mm in (2.0, 3.0)]
+    calibrated = [replace(offset_row("cylinder", "nurbs", mm), self_calibrated=True)
+                  for mm in (0.5, 0.7)]  # fmt: skip
+    assert calibrated[0].label == "nurbs, self-calibrated"
+    oracle = replace(calibrated[0], oracle_views=True)
+    assert oracle.label == "nurbs, self-calibrated (oracle views)"
+    # The plain row first, then the self-calibrated one (Table I's order).
+    assert [r.self_calibrated for r in sort_rows(calibrated[:1] + plain[:1])] == [False, True]
+    markdown = render_markdown([plain[0], calibrated[0]], paper=load_paper_table())
+    assert "| cylinder | nurbs | 2.00 |" in markdown
+    assert "| cylinder | nurbs, self-calibrated | 0.50 |" in markdown
+    records = json.loads(render_json([plain[0], calibrated[0]]))
+    assert [r.get("self_calibrated", False) for r in records] == [False, True]
+    lines = list(csv.DictReader(io.StringIO(render_csv([plain[0], calibrated[0]]))))
+    assert [line["self_calibrated"] for line in lines] == ["", "True"]
+    assert "self_calibrated" not in render_csv(plain)  # no column for runs without them
+    aggregates = aggregate_rows(plain + calibrated)
+    assert [(a.label, a.runs) for a in aggregates] == [
+        ("nurbs", 2),
+        ("nurbs, self-calibrated", 2),
+    ]
+    assert [a.mean["mean_mm"] for a in aggregates] == pytest.approx([2.5, 0.6], abs=1e-9)
+    assert [r.get("self_calibrated", False) for r in aggregate_records(aggregates)] == [
+        False,
+        True,
+    ]
+
+
 def test_aggregates_over_seeds_skip_failed_runs_and_give_t_intervals() -> None:
     from scrapcut_cli.evaluation.report import aggregate_records, aggregate_rows
 

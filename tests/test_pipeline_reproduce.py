@@ -149,3 +149,53 @@ def test_several_seeds_give_table1_with_intervals(
     assert result.table_markdown in markdown.replace(
         "# Table I reproduced on the simulator\n\n", ""
     )
+
+
+def test_self_calibrate_adds_a_row_beside_each_plain_one(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The option reaches every scan task, and Table I keeps the self-calibrated rows apart."""
+    from pipeline_fakes import fake_scan
+
+    from scrapcut_cli.pipeline import reproduce as module
+
+    planned: list[module.ScanTask] = []
+
+    def recording_fake(task: module.ScanTask) -> module.ScanRun:
+        planned.append(task)
+        return fake_scan(task)
+
+    monkeypatch.setattr(module, "run_scan", recording_fake)
+    with Engine(scheduler=INLINE) as engine:
+        result = reproduce(
+            tmp_path / "out",
+            objects=["cylinder"],
+            methods=["nurbs", "skeleton"],
+            config=ScrapcutConfig().override("sim", mode="explore"),
+            seeds=[0, 1],
+            engine=engine,
+            plots=False,
+            self_calibrate=True,
+        )
+    assert len(planned) == 4 and all(t.self_calibrate for t in planned)
+    assert len(result.rows) == 8
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["options"]["self_calibrate"] is True
+    labels = [(t["label"], t["runs"]) for t in report["table1"]]
+    assert labels == [
+        ("nurbs", 2),
+        ("nurbs, self-calibrated", 2),
+        ("skeleton", 2),
+        ("skeleton, self-calibrated", 2),
+    ]
+    # Seeds 0 and 1: plain rows 1 and 2 mm off (mean 1.5), self-calibrated 0.1 and 0.2 mm.
+    assert [t["mean_mm"] for t in report["table1"]] == pytest.approx([1.5, 0.15] * 2, abs=1e-9)
+    assert "| cylinder | nurbs, self-calibrated | 2/2 | 0.15 ± " in result.table_markdown
+
+
+def test_self_calibrated_rows_refuse_a_configured_calibration(tmp_path: Path) -> None:
+    config = ScrapcutConfig().override("calibration", self_calibrate=True)
+    with pytest.raises(PipelineError, match="must not set calibration"):
+        reproduce(tmp_path / "out", objects=["cylinder"], methods=["nurbs"], config=config,
+                  self_calibrate=True)  # fmt: skip
+    assert not (tmp_path / "out").exists()

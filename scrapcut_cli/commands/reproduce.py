@@ -103,6 +103,12 @@ def _names(values: tuple[str, ...]) -> list[str]:
     help="Skip planning the Panda's trajectory of each path (the report's execution table).",
 )
 @click.option(
+    "--self-calibrate",
+    is_flag=True,
+    help="Also fit every scan as 'fit --self-calibrate' does (hand-eye and clock calibration "
+    "estimated from the scan): a second row per object and method, labelled self-calibrated.",
+)
+@click.option(
     "--readme",
     type=click.Path(dir_okay=False, exists=True, path_type=Path),
     default=None,
@@ -141,6 +147,7 @@ def reproduce(
     leaf_sweep_mm: str,
     no_plots: bool,
     no_motion: bool,
+    self_calibrate: bool,
     readme: Path | None,
     readme_section: str,
     out_dir: Path,
@@ -209,6 +216,7 @@ def reproduce(
                 plots=not no_plots,
                 motion=not no_motion,
                 progress=update,
+                self_calibrate=self_calibrate,
                 command=" ".join(["scrapcut", *(shlex.quote(a) for a in sys.argv[1:])])
                 if sys.argv and Path(sys.argv[0]).name == "scrapcut"
                 else "scrapcut reproduce",

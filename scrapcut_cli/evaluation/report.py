@@ -6,7 +6,9 @@ the machine-readable ones and a percentage on screen and in markdown.
 
 A row measured on a simulator *sweep* (views that follow the true reference line: an oracle no
 real cell has) is labelled "oracle views" in every rendering (its label, ``oracle_views`` in JSON
-and CSV), so it is never mistaken for a result of the explored scans.
+and CSV), so it is never mistaken for a result of the explored scans. A row fitted with the
+hand-eye and clock calibration estimated from its own scan (``fit --self-calibrate``) is labelled
+"self-calibrated" (``self_calibrated`` in JSON and CSV) and kept apart from the plain row.
 
 Against the paper a figure of ours is *worse* when, rounded to the paper's two decimals, it is
 larger than the paper's (every Table I column is an error, so larger is worse, the minimum
@@ -48,6 +50,8 @@ PAPER_NOTES = {("basket", "skeleton"): "20 mm leaf (5 mm broke)"}
 WORSE_MARK = "▲"
 #: Label of rows whose scan followed the true line (simulator sweep mode).
 ORACLE_LABEL = "oracle views"
+#: Label of rows fitted with the calibration estimated from their own scan.
+SELF_CALIBRATED_LABEL = "self-calibrated"
 
 
 @dataclass(frozen=True)
@@ -118,6 +122,8 @@ class ReportRow:
     the rigid alignment and the shape error after it (``eval --align``); ``frame_id`` the frame
     of every coordinate; ``setpoint_surface_points`` ((K, 3) metres) and ``setpoint_flags`` the
     set-points scored (kept for ``--save-results``, not rendered).
+    ``self_calibrated`` marks a fit whose frames were posed with the calibration estimated
+    from the scan itself.
     """
 
     object: str
@@ -139,6 +145,7 @@ class ReportRow:
     frame_id: str = ""
     setpoint_surface_points: NDArray[np.float64] | None = None
     setpoint_flags: tuple[tuple[str, ...], ...] = ()
+    self_calibrated: bool = False
 
     @property
     def leaf_size_m(self) -> float | None:
@@ -147,11 +154,10 @@ class ReportRow:
 
     @property
     def label(self) -> str:
-        """Method name, with the leaf size when there is one (``skeleton 5 mm``), and
-        ``(oracle views)`` for a sweep's row."""
-        leaf = self.leaf_size_m
-        label = self.method if leaf is None else f"{self.method} {_fmt_leaf(leaf)} mm"
-        return f"{label} ({ORACLE_LABEL})" if self.oracle_views else label
+        """Method name, with the leaf size when there is one (``skeleton 5 mm``),
+        ``, self-calibrated`` for a self-calibrated fit and ``(oracle views)`` for a sweep's
+        row."""
+        return _decorated_label(_plain_label(self), self.self_calibrated, self.oracle_views)
 
     def figures_mm(self) -> dict[str, Any] | None:
         """The metric in millimetres (``PathError.summary_mm``), or None for a failed row."""
@@ -185,7 +191,10 @@ def leaf_size_from_params(params: dict[str, Any]) -> float | None:
 
 def sort_rows(rows: Iterable[ReportRow]) -> list[ReportRow]:
     """Rows ordered by object, method, then leaf size (Table I's order)."""
-    return sorted(rows, key=lambda r: (r.object, r.method, r.leaf_size_m or 0.0, r.source))
+    return sorted(
+        rows,
+        key=lambda r: (r.object, r.method, r.self_calibrated, r.leaf_size_m or 0.0, r.source),
+    )
 
 
 def worse_than_paper(row: ReportRow, paper: PaperFigures) -> list[str]:
@@ -224,6 +233,8 @@ def rows_to_records(
         aligned = row.aligned_mm()
         if aligned is not None:
             record.update(aligned)
+        if row.self_calibrated:
+            record["self_calibrated"] = True
         record.update(row.extras)
         if paper is not None:
             figures_paper = paper.get((row.object, row.method))
@@ -286,6 +297,8 @@ CSV_FIELDS = (
 def render_csv(rows: Sequence[ReportRow], *, paper: PaperTable | None = None) -> str:
     """CSV, one line per row; with ``paper``, ``paper_mean_mm``... and ``worse_than_paper``."""
     columns = list(CSV_FIELDS)
+    if any(row.self_calibrated for row in rows):
+        columns.append("self_calibrated")
     extras = list(dict.fromkeys(key for row in sort_rows(rows) for key in row.extras))
     columns += [key for key in extras if key not in columns]
     if paper is not None:
@@ -582,13 +595,12 @@ class SeedAggregate:
     labels: tuple[str, ...]
     notes: tuple[str, ...]
     oracle_views: bool = False
+    self_calibrated: bool = False
 
     @property
     def label(self) -> str:
         label = self.labels[0] if len(self.labels) == 1 else self.method
-        if self.oracle_views and ORACLE_LABEL not in label:
-            label = f"{label} ({ORACLE_LABEL})"
-        return label
+        return _decorated_label(label, self.self_calibrated, self.oracle_views)
 
     def interval_text(self, field_name: str, *, percent: bool = False) -> str:
         """``0.99 ± 0.05`` (or ``99.5 ± 0.4%``); ``—`` when every run failed."""
@@ -603,14 +615,16 @@ class SeedAggregate:
 
 
 def aggregate_rows(rows: Sequence[ReportRow]) -> list[SeedAggregate]:
-    """Group rows by object, method and oracle label; mean and 95 % interval of each figure."""
+    """Group rows by object, method, calibration and oracle label; mean and 95 % interval of
+    each figure."""
     from scipy import stats
 
-    groups: dict[tuple[str, str, bool], list[ReportRow]] = {}
+    groups: dict[tuple[str, str, bool, bool], list[ReportRow]] = {}
     for row in sort_rows(rows):
-        groups.setdefault((row.object, row.method, row.oracle_views), []).append(row)
+        key = (row.object, row.method, row.self_calibrated, row.oracle_views)
+        groups.setdefault(key, []).append(row)
     out = []
-    for (obj, method, oracle), members in groups.items():
+    for (obj, method, self_calibrated, oracle), members in groups.items():
         figures = [f for f in (r.figures_mm() for r in members) if f is not None]
         mean: dict[str, float] = {}
         half: dict[str, float | None] = {}
@@ -636,6 +650,7 @@ def aggregate_rows(rows: Sequence[ReportRow]) -> list[SeedAggregate]:
                 labels=labels,
                 notes=notes,
                 oracle_views=oracle,
+                self_calibrated=self_calibrated,
             )
         )
     return out
@@ -644,6 +659,15 @@ def aggregate_rows(rows: Sequence[ReportRow]) -> list[SeedAggregate]:
 def _plain_label(row: ReportRow) -> str:
     leaf = row.leaf_size_m
     return row.method if leaf is None else f"{row.method} {_fmt_leaf(leaf)} mm"
+
+
+def _decorated_label(label: str, self_calibrated: bool, oracle_views: bool) -> str:
+    """``nurbs`` → ``nurbs, self-calibrated (oracle views)`` as the flags say."""
+    if self_calibrated and SELF_CALIBRATED_LABEL not in label:
+        label = f"{label}, {SELF_CALIBRATED_LABEL}"
+    if oracle_views and ORACLE_LABEL not in label:
+        label = f"{label} ({ORACLE_LABEL})"
+    return label
 
 
 def aggregate_records(
@@ -661,6 +685,8 @@ def aggregate_records(
             "failed": agg.failed,
             "oracle_views": agg.oracle_views,
         }
+        if agg.self_calibrated:
+            record["self_calibrated"] = True
         for name in INTERVAL_FIELDS:
             record[name] = agg.mean.get(name)
             record[f"{name}_ci95"] = agg.half_width.get(name)

@@ -16,7 +16,10 @@ retried once at ``retry_leaf_size_m`` (20 mm, what the paper did for the basket)
 so. A failure of one object or method is a row in the table, not an abort. With ``leaf_sweep_m``
 the skeleton is also fitted at each of those leaf sizes on the same stitched cloud (no retry):
 the rows of the paper's Fig. 3, kept apart from Table I. With several ``seeds`` Table I is the
-mean ± 95 % interval over the seeds, next to the paper's single runs.
+mean ± 95 % interval over the seeds, next to the paper's single runs. With ``self_calibrate``
+every scan is also fitted as ``fit --self-calibrate`` fits it (the hand-eye and clock
+calibration estimated from the scan, the frames posed with it): a second row per object and
+method, labelled "self-calibrated", with the calibration's verdict in its note.
 
 The output folder is built under a temporary name and renamed at the end::
 
@@ -24,6 +27,7 @@ The output folder is built under a temporary name and renamed at the end::
                                      _seed<N> added with several seeds)
     DIR/paths/<object>_<method>.json the path files (scrapcut.path/v1) and their .error.json/.md
     DIR/paths/<object>_skeleton_leaf<N>mm.json   the leaf-size sweep
+    DIR/paths/<object>_<method>_selfcal.json     the self-calibrated fits
     DIR/report.md, report.json, report.csv
     DIR/plots/*.png                  error along the curve, paths, leaf sizes (first seed)
     DIR/config.toml                  the stage parameters (usable as --config)
@@ -112,6 +116,7 @@ class ScanTask:
     retry_leaf_size_m: float | None = 0.020
     leaf_sweep_m: tuple[float, ...] = ()
     motion: bool = True  # plan the Panda's trajectory of every path (scrapcut trajectory)
+    self_calibrate: bool = False
 
     @property
     def key(self) -> str:
@@ -248,12 +253,15 @@ def reproduce(
     progress: ProgressFn | None = None,
     command: str = "scrapcut reproduce",
     motion: bool = True,
+    self_calibrate: bool = False,
 ) -> ReproduceResult:
     """Record, fit and evaluate every object with every method (and seed); write ``out_dir``.
 
     ``config.sim`` sets the scan (mode, noise, resolution); its ``object`` and ``seed`` are
     replaced per task (``seeds`` default: ``config.sim.seed``). ``engine`` runs the scans
     (default: a local Dask cluster, one worker per core; closed at the end only if made here).
+    ``self_calibrate`` adds a self-calibrated row per object and method (the scans' own
+    ``config.calibration`` must name no calibration file or self-calibration).
     Raises PipelineError, before any work, if ``out_dir`` exists and is not an earlier reproduce
     output or an option is bad.
     """
@@ -275,6 +283,11 @@ def reproduce(
         raise PipelineError(f"leaf sizes must be positive, got {list(leaf_sweep_m)}")
     if config.sim.mode not in MODES:
         raise PipelineError(f"unknown mode {config.sim.mode!r}; reproduce runs {', '.join(MODES)}")
+    if self_calibrate and (config.calibration.file or config.calibration.self_calibrate):
+        raise PipelineError(
+            "self-calibrated rows sit beside rows with the recordings' own calibration: the "
+            "configuration must not set calibration.file or calibration.self_calibrate"
+        )
     check_out_dir(out_dir)
     own_engine = engine is None
     engine = Engine() if engine is None else engine
@@ -292,6 +305,7 @@ def reproduce(
                 retry_leaf_size_m=retry_leaf_size_m,
                 leaf_sweep_m=sweep,
                 motion=motion,
+                self_calibrate=self_calibrate,
             )
             scans = _run_scans(engine, tasks, progress)
             runs = _object_runs(scans)
@@ -305,6 +319,7 @@ def reproduce(
                 "engine": engine.describe(),
                 "retry_leaf_size_mm": retry_leaf_size_m * 1000.0,
                 "leaf_sweep_mm": [leaf * 1000.0 for leaf in sweep],
+                "self_calibrate": self_calibrate,
                 "mode": config.sim.mode,
                 "noise": config.sim.noise,
                 "seed": seeds[0],
@@ -338,6 +353,7 @@ def plan_scans(
     retry_leaf_size_m: float | None,
     leaf_sweep_m: tuple[float, ...] = (),
     motion: bool = True,
+    self_calibrate: bool = False,
 ) -> list[ScanTask]:
     """One task per object, seed and scan: a sweep serves every method, exploration one each."""
     tasks = []
@@ -363,6 +379,7 @@ def plan_scans(
                         retry_leaf_size_m=retry_leaf_size_m,
                         leaf_sweep_m=leaf_sweep_m,
                         motion=motion,
+                        self_calibrate=self_calibrate,
                     )
                 )
     return tasks
@@ -423,7 +440,8 @@ def _object_runs(scans: list[ScanRun]) -> list[ObjectRun]:
 
 def run_scan(task: ScanTask) -> ScanRun:
     """Record ``recordings/<stem>.mcap``, stitch it once, run one pipeline job per method on it
-    (and the leaf sweep); known failures become failed rows. Runs on a worker."""
+    (and the leaf sweep, and the self-calibrated fits); known failures become failed rows. Runs
+    on a worker."""
     from scrapcut_cli.config import config_from_dict
     from scrapcut_cli.pipeline.fit import stitch_recording_file
 
@@ -472,7 +490,42 @@ def run_scan(task: ScanTask) -> ScanRun:
                 _job_row(task, FitMethod.SKELETON, stitched, rec_path, leaf_config, None, stem)
             )
         timings["leaf_sweep"] = time.perf_counter() - t0
+    if task.self_calibrate:
+        rows += _self_calibrated_rows(task, config, rec_path, timings)
     return ScanRun(task, rows, sweep, summary, timings)
+
+
+def _self_calibrated_rows(
+    task: ScanTask, config: ScrapcutConfig, rec_path: Path, timings: dict[str, float]
+) -> list[ReportRow]:
+    """The scan stitched again with the calibration estimated from it, one job per method:
+    rows marked ``self_calibrated``, the calibration's verdict in their note."""
+    from scrapcut_cli.pipeline.fit import stitch_recording_file
+
+    config = config.override("calibration", self_calibrate=True)
+    t0 = time.perf_counter()
+    try:
+        stitched = stitch_recording_file(rec_path, config=config)
+    except ScrapcutError as exc:
+        failure = f"self-calibration failed: {exc}"
+        return [
+            ReportRow(task.object, m, None, failure=failure, self_calibrated=True)
+            for m in task.methods
+        ]
+    finally:
+        timings["self_calibrate"] = time.perf_counter() - t0
+    record = stitched.calibration or {}
+    note = "calibration consistent" if record.get("consistent") else "calibration corrected"
+    extras = _calibration_extras(record)
+    rows = []
+    for method in task.methods:
+        t0 = time.perf_counter()
+        stem = f"{task.object}_{method}_selfcal"
+        row = _job_row(task, method, stitched, rec_path, config, task.retry_leaf_size_m, stem)
+        notes = "; ".join(n for n in (note, row.note) if n)
+        rows.append(replace(row, self_calibrated=True, note=notes, extras={**row.extras, **extras}))
+        timings[f"fit_selfcal_{method}"] = time.perf_counter() - t0
+    return rows
 
 
 def _record(task: ScanTask, config: ScrapcutConfig, rec_path: Path) -> RecordResult:
@@ -546,11 +599,32 @@ def _execution(fit: FitResult, scene: ObservedScene, config: ScrapcutConfig) -> 
     return execution_figures(traj)
 
 
+def _calibration_extras(record: dict[str, Any]) -> dict[str, Any]:
+    """A self-calibration's correction as row figures (mm, deg, ms; JSON and CSV)."""
+    correction = record.get("correction")
+    if not correction:
+        return {}
+    observable = record.get("observable", {})
+    flags = [*observable.get("translation", []), *observable.get("rotation", [])]
+    flags.append(observable.get("time_offset", False))
+    return {
+        "calibration_translation_mm": 1000.0 * float(np.linalg.norm(correction["translation_m"])),
+        "calibration_rotation_deg": float(np.linalg.norm(correction["rotation_deg"])),
+        "calibration_clock_ms": 1000.0 * float(correction["time_offset_s"]),
+        "calibration_observable": f"{sum(bool(f) for f in flags)}/{len(flags)}",
+    }
+
+
 def _failed_scan(
     task: ScanTask, failure: str, timings: dict[str, float], summary: dict[str, Any]
 ) -> ScanRun:
     summary = {**summary, "failure": failure}
     rows = [ReportRow(task.object, m, None, failure=failure) for m in task.methods]
+    if task.self_calibrate:
+        rows += [
+            ReportRow(task.object, m, None, failure=failure, self_calibrated=True)
+            for m in task.methods
+        ]
     return ScanRun(task, rows, [], summary, timings, failure=failure)
 
 
