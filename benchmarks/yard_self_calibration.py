@@ -1,9 +1,10 @@
 """The yard table with and without self-calibration, on the recordings of a reproduce run.
 
-Takes the output folder of ``scrapcut reproduce`` (its recordings, report.json and
-config.toml) and fits every recording again with ``fit --self-calibrate``'s job (the same
-pipeline, the same stage parameters, ``calibration.self_calibrate`` on), measured against the
-painted reference as ``scrapcut eval`` does. Prints, per object and method:
+Takes the output folder of a one-seed ``scrapcut reproduce`` (its recordings, report.json and
+config.toml). A run made with ``--self-calibrate`` holds the self-calibrated rows and their
+path files already; otherwise every recording is fitted again with ``fit --self-calibrate``'s
+job (the same pipeline, the same stage parameters, ``calibration.self_calibrate`` on), measured
+against the painted reference as ``scrapcut eval`` does. Prints, per object and method:
 
 - the reproduce run's row and the self-calibrated row (mean, SD, max, coverage, reverse max,
   length ratio: the README's yard-table columns) and the change in mean error;
@@ -14,8 +15,8 @@ painted reference as ``scrapcut eval`` does. Prints, per object and method:
 Then the means over all rows and the issue's goals (mean path error <= 1.2 mm; mount within
 0.5 mm / 0.1 deg and clock within 2 ms where observable; clean recordings changed <= 0.1 mm).
 
-    scrapcut reproduce --objects all --noise yard --leaf-sweep-mm none -o yard
-    .venv/bin/python benchmarks/yard_self_calibration.py yard [--markdown]
+    scrapcut reproduce --objects all --noise yard --leaf-sweep-mm none --self-calibrate -o yard
+    .venv/bin/python benchmarks/yard_self_calibration.py yard
 """
 
 from __future__ import annotations
@@ -56,8 +57,15 @@ def _truth(path: Path) -> tuple[np.ndarray, float] | None:
     return np.r_[1000.0 * C[:3, 3], rot], 1000.0 * float(truth["time_offset_s"])
 
 
-def _rows(report: dict[str, Any]) -> dict[tuple[str, str], dict[str, Any]]:
-    return {(r["object"], r["method"]): r for r in report.get("rows", [])}
+def _rows(
+    report: dict[str, Any], *, self_calibrated: bool
+) -> dict[tuple[str, str], dict[str, Any]]:
+    """The plain (or the self-calibrated) rows by object and method."""
+    return {
+        (r["object"], r["method"]): r
+        for r in report.get("rows", [])
+        if bool(r.get("self_calibrated")) == self_calibrated
+    }
 
 
 def _fmt(row: dict[str, Any] | None) -> str:
@@ -84,25 +92,33 @@ def main() -> None:
     folder: Path = args.folder
     report = json.loads((folder / "report.json").read_text())
     config = load_config(folder / "config.toml").override("calibration", self_calibrate=True)
-    before = _rows(report)
+    before = _rows(report, self_calibrated=False)
+    done = _rows(report, self_calibrated=True)
     lines = []
     deltas, means, t_errs, r_errs, c_errs = [], [], [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         for (obj, method), row in sorted(before.items()):
             recording = _recording_of(folder, obj, method)
-            t0 = time.perf_counter()
-            job = Job(
-                recording,
-                FitMethod(method.split()[0]),
-                config,
-                output=Path(tmp) / f"{obj}_{method.split()[0]}.json",
-                object_name=obj,
-                retry_leaf_size_m=0.020,
-            )
-            result = run_job(job)
-            seconds = time.perf_counter() - t0
-            after = None if result.report.row is None else _row_dict(result.report.row)
-            calibration = None if result.fit is None else result.fit.calibration
+            if (obj, method) in done:  # reproduce --self-calibrate fitted it already
+                after = done[(obj, method)]
+                calibration = _path_calibration(folder, after)
+                when = "reproduce"
+                if after.get("mean_mm") is None:
+                    after = None
+            else:
+                t0 = time.perf_counter()
+                job = Job(
+                    recording,
+                    FitMethod(method.split()[0]),
+                    config,
+                    output=Path(tmp) / f"{obj}_{method.split()[0]}.json",
+                    object_name=obj,
+                    retry_leaf_size_m=0.020,
+                )
+                result = run_job(job)
+                when = f"{time.perf_counter() - t0:.0f} s"
+                after = None if result.report.row is None else _row_dict(result.report.row)
+                calibration = None if result.fit is None else result.fit.calibration
             truth = _truth(recording)
             found = "-"
             if calibration is not None and truth is not None:
@@ -135,15 +151,14 @@ def main() -> None:
                 means.append(after["mean_mm"])
                 delta = f"{d:+.2f}"
             lines.append(
-                f"| {obj} | {method} | {_fmt(row)} | {_fmt(after)} | {delta} | {found} | "
-                f"{seconds:.0f} s |"
+                f"| {obj} | {method} | {_fmt(row)} | {_fmt(after)} | {delta} | {found} | {when} |"
             )
             print(lines[-1], flush=True)
     print()
     header = " | ".join(COLUMNS)
     print(
         f"| object | method | before: {header} | self-calibrated: {header} | Δ mean [mm] | "
-        "calibration vs truth | time |"
+        "calibration vs truth | fitted in |"
     )
     print("|" + "---|" * (2 * len(COLUMNS) + 5))
     print("\n".join(lines))
@@ -160,6 +175,15 @@ def main() -> None:
             f"{np.nanmax(c_errs) if np.isfinite(c_errs).any() else float('nan'):.2f} ms "
             "(goal 2 ms)"
         )
+
+
+def _path_calibration(folder: Path, record: dict[str, Any]) -> dict[str, Any] | None:
+    """The ``calibration`` a self-calibrated row's path file recorded."""
+    if not record.get("path"):
+        return None
+    data = json.loads((folder / record["path"]).read_text())
+    calibration = data.get("calibration")
+    return calibration if isinstance(calibration, dict) else None
 
 
 def _recording_of(folder: Path, obj: str, method: str) -> Path:
