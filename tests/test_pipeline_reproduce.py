@@ -199,3 +199,19 @@ def test_self_calibrated_rows_refuse_a_configured_calibration(tmp_path: Path) ->
         reproduce(tmp_path / "out", objects=["cylinder"], methods=["nurbs"], config=config,
                   self_calibrate=True)  # fmt: skip
     assert not (tmp_path / "out").exists()
+
+
+def test_the_self_calibrated_note_says_what_the_scan_could_check() -> None:
+    from scrapcut_cli.pipeline.reproduce import _calibration_note
+
+    def record(consistent: bool, observable: list[bool]) -> dict[str, object]:
+        flags = {"translation": observable[:3], "rotation": observable[3:6],
+                 "time_offset": observable[6]}  # fmt: skip
+        return {"consistent": consistent, "observable": flags}
+
+    assert _calibration_note(record(False, [True] * 7)) == "calibration corrected"
+    assert _calibration_note(record(True, [True] * 7)) == "calibration consistent"
+    where = _calibration_note(record(True, [True] * 6 + [False]))
+    assert where == "calibration consistent where observable"
+    nothing = _calibration_note(record(True, [False] * 7))
+    assert nothing == "calibration not observable: published kept"

@@ -515,7 +515,7 @@ def _self_calibrated_rows(
     finally:
         timings["self_calibrate"] = time.perf_counter() - t0
     record = stitched.calibration or {}
-    note = "calibration consistent" if record.get("consistent") else "calibration corrected"
+    note = _calibration_note(record)
     extras = _calibration_extras(record)
     rows = []
     for method in task.methods:
@@ -597,6 +597,20 @@ def _execution(fit: FitResult, scene: ObservedScene, config: ScrapcutConfig) -> 
     except ScrapcutError as exc:
         return {"panda_executable": 0.0, "panda_failure": str(exc)}
     return execution_figures(traj)
+
+
+def _calibration_note(record: dict[str, Any]) -> str:
+    """What the self-calibration concluded, in a few words that stay the same over seeds."""
+    observable = record.get("observable", {})
+    flags = [*observable.get("translation", []), *observable.get("rotation", [])]
+    flags.append(bool(observable.get("time_offset", False)))
+    if not record.get("consistent"):
+        return "calibration corrected"
+    if not any(flags):
+        return "calibration not observable: published kept"
+    if not all(flags):
+        return "calibration consistent where observable"
+    return "calibration consistent"
 
 
 def _calibration_extras(record: dict[str, Any]) -> dict[str, Any]:
