@@ -214,7 +214,7 @@ def test_self_calibrated_rows_are_labelled_and_kept_apart_from_the_plain_ones() 
     markdown = render_markdown([plain[0], calibrated[0]], paper=load_paper_table())
     assert "| cylinder | nurbs | 2.00 |" in markdown
     assert "| cylinder | nurbs, self-calibrated | 0.50 |" in markdown
-    records = json.loads(render_json([plain[0], calibrated[0]]))
+    records = json.loads(render_json([plain[0], calibrated[0]]))["rows"]
     assert [r.get("self_calibrated", False) for r in records] == [False, True]
     lines = list(csv.DictReader(io.StringIO(render_csv([plain[0], calibrated[0]]))))
     assert [line["self_calibrated"] for line in lines] == ["", "True"]
