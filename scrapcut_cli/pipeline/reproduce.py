@@ -26,8 +26,8 @@ The output folder is built under a temporary name and renamed at the end::
     DIR/recordings/<object>.mcap     the simulated scans (<object>_<method>.mcap when exploring;
                                      _seed<N> added with several seeds)
     DIR/paths/<object>_<method>.json the path files (scrapcut.path/v1) and their .error.json/.md
-    DIR/paths/<object>_skeleton_leaf<N>mm.json   the leaf-size sweep
     DIR/paths/<object>_<method>_selfcal.json     the self-calibrated fits
+    DIR/paths/<object>_skeleton_leaf<N>mm.json   the leaf-size sweep
     DIR/report.md, report.json, report.csv
     DIR/plots/*.png                  error along the curve, paths, leaf sizes (first seed)
     DIR/config.toml                  the stage parameters (usable as --config)
