@@ -37,7 +37,7 @@ def test_convert_and_read_back(
     target = tmp_path / output
     result = CliRunner().invoke(cli, ["convert", str(recording), "-o", str(target), *extra])
     assert result.exit_code == 0, result.output
-    assert f"wrote {target} ({fmt})" in result.stderr
+    assert f"wrote {target} ({fmt}, " in result.stderr
     with open_recording(recording) as a, open_recording(target) as b:
         assert b.format == fmt
         frames_a, frames_b = list(a.frames()), list(b.frames())
@@ -62,3 +62,67 @@ def test_errors_are_one_line(recording: Path, tmp_path: Path) -> None:
     assert not (tmp_path / "o.bag").exists()
     usage = runner.invoke(cli, ["convert", str(recording)])
     assert usage.exit_code == 2  # -o is required
+
+
+@pytest.mark.parametrize(
+    ("output", "extra"),
+    [("out.mcap", []), ("out.bag", []), ("out_dir", []), ("out_sqlite", ["--storage", "sqlite3"])],
+)
+def test_output_is_compressed_unless_asked_not_to(
+    recording: Path, tmp_path: Path, output: str, extra: list[str]
+) -> None:
+    import json
+
+    sizes = {}
+    for compress in ("default", "none"):
+        target = tmp_path / compress / output
+        target.parent.mkdir()
+        flag = [] if compress == "default" else ["--compress", "none"]
+        args = ["convert", str(recording), "-o", str(target), "--json", *extra, *flag]
+        result = CliRunner().invoke(cli, args)
+        assert result.exit_code == 0, result.output
+        summary = json.loads(result.stdout)
+        assert summary["schema"] == "scrapcut.convert/v1" and summary["tool_version"]
+        sizes[compress] = summary["size_bytes"]
+        with open_recording(target) as rec:
+            assert len(list(rec.frames())) == 2
+    # The synthetic images are noise (they shrink by ~20 %; a real scan's by more): the default
+    # output is compressed, --compress none is not.
+    assert sizes["default"] < 0.9 * sizes["none"], sizes
+
+
+def test_topics_keeps_only_those_named(recording: Path, tmp_path: Path) -> None:
+    from helpers import SCAN_COLOR_TOPIC
+
+    target = tmp_path / "tf_only.mcap"
+    result = CliRunner().invoke(
+        cli, ["convert", str(recording), "-o", str(target), "--topics", f"/tf,{SCAN_COLOR_TOPIC}"]
+    )
+    assert result.exit_code == 0, result.output
+    with open_recording(recording) as a, open_recording(target) as b:
+        assert [t.name for t in b.topics()] == [SCAN_COLOR_TOPIC, "/tf"]
+        counts = {t.name: t.count for t in a.topics()}
+        assert {t.name: t.count for t in b.topics()} == {
+            "/tf": counts["/tf"],
+            SCAN_COLOR_TOPIC: counts[SCAN_COLOR_TOPIC],
+        }
+        assert b.metadata == a.metadata
+
+
+def test_convert_refusals_name_what_to_do(recording: Path, tmp_path: Path) -> None:
+    runner = CliRunner()
+    missing = runner.invoke(
+        cli, ["convert", str(recording), "-o", str(tmp_path / "x.mcap"), "--topics", "/nope"]
+    )
+    assert missing.exit_code == 1
+    (line,) = missing.stderr.strip().splitlines()
+    assert line.startswith(f"scrapcut: error: no topic /nope in {recording}; it has ")
+    assert "/tf" in line
+    zstd_bag = runner.invoke(
+        cli, ["convert", str(recording), "-o", str(tmp_path / "x.bag"), "--compress", "zstd"]
+    )
+    assert zstd_bag.exit_code == 1
+    assert "a ROS 1 bag cannot be compressed with zstd; it takes lz4, bz2, none" in (
+        zstd_bag.stderr
+    )
+    assert not list(tmp_path.iterdir())

@@ -5,6 +5,11 @@ bytes pass unchanged; to or from ROS 1 each message is deserialised and migrated
 (rosbags' ``migrate_message``: ``k`` <-> ``K``, a header ``seq``), so ROS 1 tools see ROS 1
 messages. Metadata travels as MCAP metadata records, a ROS 2 bag's ``custom_data``, or a
 /scrapcut/metadata string on ROS 1. Output is written under a temporary name and renamed.
+
+Output is compressed by default, as the recorders write it (:data:`DEFAULT_COMPRESSION`):
+zstd chunks in MCAP (and in a ROS 2 bag's MCAP storage), zstd messages in a ROS 2 sqlite3 bag,
+lz4 chunks in a ROS 1 bag (ROS 1 knows only bz2 and lz4). ``topics`` keeps only the topics
+named (a long real recording cut down to the camera and /tf).
 """
 
 from __future__ import annotations
@@ -12,7 +17,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +34,15 @@ from scrapcut_cli.recording.writer import McapWriter
 
 FORMATS = ("mcap", "ros1", "ros2")
 ROS2_STORAGES = ("mcap", "sqlite3")
+#: Compressions a user can ask for, and those each output can hold.
+COMPRESSIONS = ("zstd", "lz4", "bz2", "none")
+_SUPPORTED = {
+    "mcap": ("zstd", "lz4", "none"),
+    "ros1": ("lz4", "bz2", "none"),
+    "ros2": ("zstd", "none"),
+}
+#: Each format's usual compression (what its recorders write).
+DEFAULT_COMPRESSION = {"mcap": "zstd", "ros1": "lz4", "ros2": "zstd"}
 
 
 def format_for_path(path: str | os.PathLike[str]) -> str:
@@ -43,15 +57,25 @@ def convert_recording(
     *,
     fmt: str | None = None,
     storage: str = "mcap",
+    compression: str | None = None,
+    topics: Sequence[str] | None = None,
 ) -> None:
     """Write the recording ``src`` to ``dst`` as ``fmt`` (default: from ``dst``'s suffix).
 
-    ``storage`` picks the ROS 2 bag's storage plugin (``mcap`` or ``sqlite3``). ``dst`` is
-    replaced only when the conversion succeeds.
+    ``storage`` picks the ROS 2 bag's storage plugin (``mcap`` or ``sqlite3``);
+    ``compression`` one of :data:`COMPRESSIONS` the format holds (default: the format's usual
+    one, :data:`DEFAULT_COMPRESSION`); ``topics`` the topics to keep (default: all; each must
+    exist). ``dst`` is replaced only when the conversion succeeds.
     """
     fmt = fmt or format_for_path(dst)
     if fmt not in FORMATS:
         raise RecordingError(f"unknown recording format {fmt!r}; known: {', '.join(FORMATS)}")
+    compression = compression or DEFAULT_COMPRESSION[fmt]
+    if compression not in _SUPPORTED[fmt]:
+        kind = {"mcap": "an MCAP file", "ros1": "a ROS 1 bag", "ros2": "a ROS 2 bag"}[fmt]
+        raise RecordingError(
+            f"{kind} cannot be compressed with {compression}; it takes {', '.join(_SUPPORTED[fmt])}"
+        )
     if storage not in ROS2_STORAGES:
         raise RecordingError(
             f"unknown ROS 2 storage {storage!r}; known: {', '.join(ROS2_STORAGES)}"
@@ -80,13 +104,28 @@ def convert_recording(
         raise RecordingError(f"{dst_path} is a directory; an {fmt} recording is a file")
     check_output_path(dst_path, directory=fmt == "ros2")
     with open_recording(src_path) as rec:
+        kept = _kept_topics(rec, topics)
         translate = _Translator(rec, to_ros1=fmt == "ros1")
         if fmt == "mcap":
-            _write_mcap(rec, dst_path, translate)
+            _write_mcap(rec, dst_path, translate, kept, compression)
         elif fmt == "ros2":
-            _write_ros2(rec, dst_path, translate, storage)
+            _write_ros2(rec, dst_path, translate, kept, storage, compression)
         else:
-            _write_ros1(rec, dst_path, translate)
+            _write_ros1(rec, dst_path, translate, kept, compression)
+
+
+def _kept_topics(rec: Recording, wanted: Sequence[str] | None) -> list[str]:
+    """The topics to copy: all but the ROS 1 metadata topic, or those ``wanted`` (each must be
+    in the recording)."""
+    present = [t.name for t in rec.topics() if t.name != METADATA_TOPIC]
+    if wanted is None:
+        return present
+    missing = [t for t in wanted if t not in present]
+    if missing:
+        raise RecordingError(
+            f"no topic {', '.join(missing)} in {rec.path}; it has {', '.join(present)}"
+        )
+    return [t for t in present if t in set(wanted)]
 
 
 def _is_foreign_directory(path: Path) -> bool:
@@ -137,23 +176,20 @@ class _Translator:
         return bytes(self.store.serialize_cdr(out, msgtype, little_endian=True))
 
 
-def _copied(rec: Recording) -> Iterator[tuple[str, str, int, bytes]]:
-    """Every message except the ROS 1 metadata topic (metadata is re-emitted natively)."""
-    for conn, log_time, raw in _copied_with_connections(rec):
+def _copied(rec: Recording, topics: list[str]) -> Iterator[tuple[str, str, int, bytes]]:
+    """Every message of ``topics`` (metadata is re-emitted natively, not copied)."""
+    for conn, log_time, raw in rec.raw_connection_messages(topics):
         yield conn.topic, conn.msgtype, log_time, raw
 
 
-def _copied_with_connections(rec: Recording) -> Iterator[tuple[Any, int, bytes]]:
-    topics = [t.name for t in rec.topics() if t.name != METADATA_TOPIC]
-    return rec.raw_connection_messages(topics)
-
-
-def _write_mcap(rec: Recording, dst: Path, translate: _Translator) -> None:
+def _write_mcap(
+    rec: Recording, dst: Path, translate: _Translator, topics: list[str], compression: str
+) -> None:
     msgdefs: dict[str, str] = {}
-    with McapWriter(dst) as writer:
+    with McapWriter(dst, compression=compression) as writer:
         for name, data in sorted(rec.metadata.items()):
             writer.add_metadata(name, data)
-        for topic, msgtype, log_time, raw in _copied(rec):
+        for topic, msgtype, log_time, raw in _copied(rec, topics):
             if msgtype not in msgdefs:
                 msgdefs[msgtype] = m.msgdef_text(msgtype, translate.store)
             writer.write_raw(
@@ -165,21 +201,36 @@ def _write_mcap(rec: Recording, dst: Path, translate: _Translator) -> None:
             )
 
 
-def _write_ros2(rec: Recording, dst: Path, translate: _Translator, storage: str) -> None:
+def _write_ros2(
+    rec: Recording,
+    dst: Path,
+    translate: _Translator,
+    topics: list[str],
+    storage: str,
+    compression: str,
+) -> None:
     from rosbags.convert.converter import LATCH
     from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
+    from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 
     plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    # MCAP storage compresses its chunks (what `ros2 bag record` does by default); sqlite3
+    # storage can only compress message by message.
+    mode = CompressionMode.NONE
+    if compression == "zstd":
+        mode = CompressionMode.STORAGE if storage == "mcap" else CompressionMode.MESSAGE
     with atomic_path(dst, directory=True) as tmp:
         # rosbags creates the bag directory itself and names the storage file after it:
         # write tmp/<name>/ and lift its files into tmp, which is renamed onto dst.
         bag = tmp / dst.name
         try:
-            with Writer(bag, version=9, storage_plugin=plugin) as writer:
+            writer = Writer(bag, version=9, storage_plugin=plugin)
+            writer.set_compression(mode, CompressionFormat.ZSTD)
+            with writer:
                 for name, data in sorted(rec.metadata.items()):
                     writer.set_custom_data(CUSTOM_DATA_PREFIX + name, json.dumps(data))
                 connections: dict[str, Any] = {}
-                for topic, msgtype, log_time, raw in _copied(rec):
+                for topic, msgtype, log_time, raw in _copied(rec, topics):
                     conn = connections.get(topic)
                     if conn is None:
                         conn = writer.add_connection(
@@ -197,18 +248,23 @@ def _write_ros2(rec: Recording, dst: Path, translate: _Translator, storage: str)
         bag.rmdir()
 
 
-def _write_ros1(rec: Recording, dst: Path, translate: _Translator) -> None:
+def _write_ros1(
+    rec: Recording, dst: Path, translate: _Translator, topics: list[str], compression: str
+) -> None:
     from rosbags.interfaces import ConnectionExtRosbag1
     from rosbags.rosbag1 import Writer, WriterError
 
     with atomic_path(dst) as tmp:
         tmp.unlink()  # rosbags refuses to overwrite; it creates the file itself
         try:
-            with Writer(tmp) as writer:
+            writer = Writer(tmp)
+            if compression != "none":
+                writer.set_compression(Writer.CompressionFormat[compression.upper()])
+            with writer:
                 connections: dict[tuple[str, str | None], Any] = {}
                 if rec.metadata:
                     _write_ros1_metadata(writer, rec, translate)
-                for source, log_time, raw in _copied_with_connections(rec):
+                for source, log_time, raw in rec.raw_connection_messages(topics):
                     topic, msgtype = source.topic, source.msgtype
                     # A ROS 1 bag keeps one connection per publisher (two /tf_static nodes
                     # must stay two latched connections); other formats do not know them.
