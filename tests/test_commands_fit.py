@@ -60,7 +60,7 @@ def test_fit_writes_the_path_file_and_every_export(
 ) -> None:
     rec, reference = scene
     out = tmp_path / "out" / "path.json"
-    args = [rec, "--method", method, "-o", out, "--csv", "--mcap", "--json"]
+    args = [rec, "--method", method, "-o", out, "--csv", "--tum", "--mcap", "--json", "--parents"]
     if method == "nurbs":
         args += ["--nurbs-json", tmp_path / "nurbs.json"]
     result = _run("fit", *args)
@@ -87,8 +87,17 @@ def test_fit_writes_the_path_file_and_every_export(
     assert summary["curve_length_m"] == pytest.approx(curve.length)
     assert set(summary["time_s"]) == {"read_stitch", "fit", "toolpath", "total"}
     csv_rows = (tmp_path / "out" / "path.csv").read_text().splitlines()
-    assert csv_rows[0] == "s,x,y,z,qx,qy,qz,qw,nx,ny,nz,speed_m_s,t_s"
-    assert len(csv_rows) == len(path) + 1
+    assert csv_rows[0] == "# frame_id: panda_link0"
+    assert csv_rows[1] == "s,x,y,z,qx,qy,qz,qw,nx,ny,nz,speed_m_s,t_s,flags"
+    assert len(csv_rows) == len(path) + 2
+    assert [r.rsplit(",", 1)[1] for r in csv_rows[2:]] == [";".join(f) for f in path.flags]
+    # TUM as evo reads it: `t x y z qx qy qz qw`, comments skipped, time increasing.
+    tum = np.loadtxt(tmp_path / "out" / "path.tum", comments="#")
+    assert tum.shape == (len(path), 8)
+    np.testing.assert_allclose(tum[:, 0], path.time, rtol=1e-15)
+    np.testing.assert_allclose(tum[:, 1:4], path.positions, atol=1e-15)
+    np.testing.assert_allclose(tum[:, 4:], path.orientations_xyzw, atol=1e-15)
+    assert np.all(np.diff(tum[:, 0]) > 0)
     _check_mcap(tmp_path / "out" / "path.mcap", len(path))
     if method == "nurbs":
         # geomdl's own format (its evaluation is checked by the fitting tests): the same NURBS
@@ -106,6 +115,7 @@ def test_fit_writes_the_path_file_and_every_export(
         "path.error.md",
         "path.json",
         "path.mcap",
+        "path.tum",
     ]
 
 
@@ -211,7 +221,7 @@ def test_table_output_and_options_reach_the_path_file(
         "--material", "mild_steel_propane", "--thickness-mm", "25.4", "--smoothness", "0.5",
     )  # fmt: skip
     assert result.exit_code == 0, result.output
-    for label in ("frames used / skipped", "curve length", "set-points", "flagged", "fit residual"):
+    for label in ("frames used / skipped", "curve length", "set-points", "flagged", "paint spread"):
         assert label in result.stdout
     _, path, meta = read_path_file(out)
     assert meta["config"]["toolpath"]["standoff_m"] == pytest.approx(0.012)
@@ -429,3 +439,26 @@ def test_fit_refuses_a_bad_start_in_one_line(
     result = _run("fit", rec, "--start", "1,2", "-o", out)
     assert result.exit_code == 2 and "toolpath.start must be" in result.output
     assert "Traceback" not in result.output and not out.exists()
+
+
+def test_outputs_are_checked_like_good_tools_do(
+    scene: tuple[Path, np.ndarray], tmp_path: Path
+) -> None:
+    """All refused before any work: a path file not named .json, an existing output without
+    --force, a missing folder without --parents (nothing is created)."""
+    rec, _ = scene
+    wrong = _run("fit", rec, "-o", tmp_path / "path.csv")
+    assert wrong.exit_code == 2 and "a path file is JSON; name it path.json" in wrong.output
+    existing = tmp_path / "path.json"
+    existing.write_text("{}")
+    line = _one_line_error(_run("fit", rec, "-o", existing))
+    assert line.endswith("path.json: the file exists; add --force to replace it")
+    assert existing.read_text() == "{}"
+    stale = tmp_path / "new.csv"
+    stale.write_text("old")
+    line = _one_line_error(_run("fit", rec, "-o", tmp_path / "new.json", "--csv"))
+    assert line.endswith("new.csv: the file exists; add --force to replace it")
+    deep = tmp_path / "typo" / "path.json"
+    line = _one_line_error(_run("fit", rec, "-o", deep))
+    assert line.endswith(f"folder {deep.parent} does not exist (create it, or add --parents)")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["new.csv", "path.json"]

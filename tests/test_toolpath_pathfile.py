@@ -191,12 +191,14 @@ def test_nan_is_refused_and_leaves_no_file(tmp_path: Path) -> None:
 def test_csv_export(tmp_path: Path) -> None:
     _, path = _example()
     target = tmp_path / "path.csv"
-    write_path_csv(path, target)
+    write_path_csv(path, target, frame_id="panda_link0")
     with target.open(newline="") as fh:
+        assert fh.readline() == "# frame_id: panda_link0\n"
         rows = list(csv.reader(fh))
     assert tuple(rows[0]) == CSV_COLUMNS
-    assert ",".join(rows[0]) == "s,x,y,z,qx,qy,qz,qw,nx,ny,nz,speed_m_s,t_s"  # DESIGN.md
-    values = np.array(rows[1:], dtype=float)
+    assert ",".join(rows[0]) == "s,x,y,z,qx,qy,qz,qw,nx,ny,nz,speed_m_s,t_s,flags"  # docs/
+    assert [r[13] for r in rows[1:]] == [";".join(f) for f in path.flags]
+    values = np.array([r[:13] for r in rows[1:]], dtype=float)
     assert values.shape == (len(path), 13)
     np.testing.assert_array_equal(values[:, 0], path.arc_length)
     np.testing.assert_array_equal(values[:, 1:4], path.positions)

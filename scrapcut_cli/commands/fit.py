@@ -8,7 +8,7 @@ from typing import Any
 
 import click
 
-from scrapcut_cli._io import check_output_path, real_path
+from scrapcut_cli._io import prepare_output, real_path
 from scrapcut_cli.commands._options import (
     apply_calibration_options,
     apply_stage_options,
@@ -17,6 +17,7 @@ from scrapcut_cli.commands._options import (
     config_option,
     config_type,
     mm_to_m,
+    output_options,
     paint_options,
     perception_options,
     recording_options,
@@ -43,9 +44,20 @@ METHODS = choice_names(FitMethod)
     "--output",
     type=click.Path(dir_okay=False, path_type=Path),
     required=True,
-    help="Path file to write (scrapcut.path/v1 JSON).",
+    help="Path file to write (scrapcut.path/v1 JSON, named *.json).",
 )
-@click.option("--csv", "write_csv", is_flag=True, help="Also write the set-points as PATH.csv.")
+@click.option(
+    "--csv",
+    "write_csv",
+    is_flag=True,
+    help="Also write the set-points as PATH.csv (SI units, a flags column, a # frame_id line).",
+)
+@click.option(
+    "--tum",
+    "write_tum",
+    is_flag=True,
+    help="Also write the torch poses as PATH.tum (t x y z qx qy qz qw; evo_traj tum reads it).",
+)
 @click.option(
     "--mcap",
     "write_mcap",
@@ -185,11 +197,13 @@ METHODS = choice_names(FitMethod)
 @paint_options
 @perception_options
 @stitch_options
+@output_options
 def fit(
     recording: Path,
     method: str,
     output: Path,
     write_csv: bool,
+    write_tum: bool,
     write_mcap: bool,
     nurbs_json: Path | None,
     as_json: bool,
@@ -215,6 +229,8 @@ def fit(
     calibration_path: Path | None,
     self_calibrate: bool,
     config_path: Path | None,
+    force: bool,
+    parents: bool,
     **shared: Any,
 ) -> None:
     """Fit the painted line of RECORDING and write the cutting path.
@@ -235,9 +251,15 @@ def fit(
     from scrapcut_cli.pipeline.evaluate import error_report_paths
     from scrapcut_cli.pipeline.job import Job, Pipeline
 
+    if output.suffix.lower() != ".json":
+        raise click.UsageError(
+            f"-o {output}: a path file is JSON; name it {output.with_suffix('.json').name} "
+            "(--csv, --tum and --mcap write their files beside it)"
+        )
     csv_path = output.with_suffix(".csv") if write_csv else None
+    tum_path = output.with_suffix(".tum") if write_tum else None
     mcap_path = output.with_suffix(".mcap") if write_mcap else None
-    extra = [p for p in (csv_path, mcap_path, nurbs_json) if p is not None]
+    extra = [p for p in (csv_path, tum_path, mcap_path, nurbs_json) if p is not None]
     reports = [] if no_eval else list(error_report_paths(output))
     for target in [output, *extra, *reports]:
         if real_path(target) == real_path(recording):
@@ -249,7 +271,10 @@ def fit(
     if no_eval and reference is not None:
         raise click.UsageError("--reference and --no-eval contradict each other")
     for target in [output, *extra, *reports]:
-        check_output_path(target)  # before minutes of work: /dev/null, a FIFO, a link loop
+        # Before minutes of work: an existing file (--force), a missing folder (--parents),
+        # /dev/null, a FIFO, a link loop.
+        option = "--nurbs-json" if target == nurbs_json else "-o"
+        prepare_output(target, force=force, parents=parents, option=option)
 
     stage, shared = split_stage_options(shared)
     config = apply_stage_options(build_config(config_path, **shared), stage)
@@ -290,6 +315,7 @@ def fit(
         reference=reference,
         evaluate=not no_eval,
         csv=write_csv,
+        tum=write_tum,
         mcap=write_mcap,
         nurbs_json=nurbs_json,
     )
@@ -346,9 +372,10 @@ def _render(summary: dict[str, Any]) -> None:
         ),
         ("curve length", f"{1000 * summary['curve_length_m']:.1f} mm"),
         (
-            "fit residual",
-            f"{1000 * summary['fit_rms_m']:.2f} mm RMS, {1000 * summary['fit_max_m']:.2f} mm max "
-            "(stitched paint to curve)",
+            "paint spread",
+            f"{1000 * summary['paint_spread_rms_m']:.2f} mm RMS, "
+            f"{1000 * summary['paint_spread_max_m']:.2f} mm max around the curve (the painted "
+            "band's width and noise; not an accuracy: see error vs reference)",
         ),
         ("set-points", str(summary["setpoints"])),
         (

@@ -86,7 +86,8 @@ class FitResult:
         return dataclasses.asdict(getattr(self.config, self.method))
 
     def residual_m(self) -> tuple[float, float]:
-        """(RMS, max) distance in metres of the stitched paint to the curve polyline.
+        """(RMS, max) distance in metres of the stitched paint to the curve polyline: the
+        spread of the paint around the curve, not an accuracy.
 
         The same measure for both methods; it includes the paint band's own half width.
         """
@@ -138,8 +139,8 @@ class FitResult:
             "unobserved": info.get("unobserved", 0),
             "unobserved_arcs": list(info.get("unobserved_arcs", [])),  # type: ignore[call-overload]
             "loop": info.get("loop"),
-            "fit_rms_m": rms,
-            "fit_max_m": worst,
+            "paint_spread_rms_m": rms,
+            "paint_spread_max_m": worst,
             "fitter_info": _scalars(self.curve.info),
             "material": info.get("material"),
             "thickness_mm": info.get("thickness_mm"),

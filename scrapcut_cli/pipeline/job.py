@@ -71,8 +71,9 @@ class Job:
         /scrapcut/reference if it has one.
     evaluate : bool
         False skips the error report (``--no-eval``).
-    csv, mcap : bool
-        Also write ``PATH.csv`` (set-points) and ``PATH.mcap`` (Foxglove).
+    csv, mcap, tum : bool
+        Also write ``PATH.csv`` (set-points), ``PATH.mcap`` (Foxglove) and ``PATH.tum`` (the
+        torch poses for evo).
     nurbs_json : Path, optional
         Also write the NURBS in geomdl's JSON (NURBS only).
     source_name : str, optional
@@ -92,6 +93,7 @@ class Job:
     evaluate: bool = True
     csv: bool = False
     mcap: bool = False
+    tum: bool = False
     nurbs_json: Path | None = None
     source_name: str | None = None
     object_name: str | None = None
@@ -104,6 +106,7 @@ class Job:
         extra = [
             self.output.with_suffix(".csv") if self.csv else None,
             self.output.with_suffix(".mcap") if self.mcap else None,
+            self.output.with_suffix(".tum") if self.tum else None,
             self.nurbs_json,
         ]
         return [self.output, *(p for p in extra if p is not None)]
@@ -277,7 +280,12 @@ class Pipeline:
 
     def _write_outputs(self) -> None:
         """Path file, error report and exports, each written atomically."""
-        from scrapcut_cli.toolpath.pathfile import write_path_csv, write_path_file, write_path_mcap
+        from scrapcut_cli.toolpath.pathfile import (
+            write_path_csv,
+            write_path_file,
+            write_path_mcap,
+            write_path_tum,
+        )
 
         job, fit = self.job, self.fit
         if job.output is None or fit is None or self.path_dict is None:
@@ -286,8 +294,11 @@ class Pipeline:
         self.written.append(job.output)
         self.written += write_error_report(self.report, job.output)
         if job.csv:
-            write_path_csv(fit.path, job.output.with_suffix(".csv"))
+            write_path_csv(fit.path, job.output.with_suffix(".csv"), frame_id=fit.frame_id)
             self.written.append(job.output.with_suffix(".csv"))
+        if job.tum:
+            write_path_tum(fit.path, job.output.with_suffix(".tum"), frame_id=fit.frame_id)
+            self.written.append(job.output.with_suffix(".tum"))
         if job.mcap:
             write_path_mcap(
                 job.output.with_suffix(".mcap"),

@@ -1,4 +1,4 @@
-"""The path file (``scrapcut.path/v1`` JSON, DESIGN.md) and its CSV export.
+"""The path file (``scrapcut.path/v1`` JSON, docs/path-file.md) and its CSV and TUM exports.
 
 Fixed keys are the ones DESIGN.md lists; this module adds ``curve.spacing_m``, ``curve.info``,
 ``path.summary`` and a per-set-point ``surface_point`` (all optional when reading). Floats are
@@ -33,7 +33,9 @@ from scrapcut_cli.geometry import polyline_length, quat_xyzw_to_matrix
 from scrapcut_cli.toolpath.path import CuttingPath
 
 SCHEMA = "scrapcut.path/v1"
-CSV_COLUMNS = ("s", "x", "y", "z", "qx", "qy", "qz", "qw", "nx", "ny", "nz", "speed_m_s", "t_s")
+CSV_COLUMNS = (
+    "s", "x", "y", "z", "qx", "qy", "qz", "qw", "nx", "ny", "nz", "speed_m_s", "t_s", "flags",
+)  # fmt: skip
 #: Arrays in ``info`` dictionaries longer than this are left out of the file (e.g. a skeleton's
 #: vertices): the file keeps diagnostics, not intermediate data.
 MAX_INFO_ARRAY = 16
@@ -231,8 +233,10 @@ def read_path_file(source: str | Path) -> tuple[Curve, CuttingPath, dict[str, An
         raise ToolpathError(f"{source}: {exc}") from None
 
 
-def write_path_csv(path: CuttingPath, out: str | Path) -> None:
-    """One row per set-point: ``s,x,y,z,qx,qy,qz,qw,nx,ny,nz,speed_m_s,t_s`` (SI units)."""
+def write_path_csv(path: CuttingPath, out: str | Path, *, frame_id: str = "") -> None:
+    """One row per set-point: ``s,x,y,z,qx,qy,qz,qw,nx,ny,nz,speed_m_s,t_s,flags`` (SI units;
+    ``flags`` joined by ``;``, empty for a clean set-point), after one ``# frame_id: NAME``
+    line (``comment="#"`` in numpy/pandas skips it)."""
     table = np.column_stack(
         [
             path.arc_length,
@@ -244,9 +248,27 @@ def write_path_csv(path: CuttingPath, out: str | Path) -> None:
         ]
     )
     with atomic_path(out) as tmp, tmp.open("w", newline="", encoding="utf-8") as fh:
-        writer = csv.writer(fh)
+        fh.write(f"# frame_id: {frame_id}\n")
+        writer = csv.writer(fh, lineterminator="\n")
         writer.writerow(CSV_COLUMNS)
-        writer.writerows([repr(float(v)) for v in row] for row in table)
+        writer.writerows(
+            [*(repr(float(v)) for v in row), ";".join(flags)]
+            for row, flags in zip(table, path.flags, strict=True)
+        )
+
+
+def write_path_tum(path: CuttingPath, out: str | Path, *, frame_id: str = "") -> None:
+    """The torch tip poses in the TUM trajectory format, which ``evo_traj tum`` reads.
+
+    One line per set-point, space-separated: ``t x y z qx qy qz qw`` — ``t`` the set-point's
+    time along the cut (``t_s``, seconds, increasing), the position in metres and the
+    orientation (torch frame: z into the surface, x along the travel) in ``frame_id``, named
+    on a leading ``#`` line (TUM readers skip comments).
+    """
+    table = np.column_stack([path.time, path.positions, path.orientations_xyzw])
+    lines = [f"# frame_id: {frame_id}", "# t x y z qx qy qz qw"]
+    lines += [" ".join(repr(float(v)) for v in row) for row in table]
+    write_text_atomic(out, "\n".join(lines) + "\n")
 
 
 #: Topics of the MCAP export (base frame), laid out for Foxglove's 3D panel.
