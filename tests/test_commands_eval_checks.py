@@ -280,3 +280,47 @@ def test_outputs_need_force_to_replace_and_parents_to_create(tmp_path: Path, ref
     assert not (tmp_path / "no").exists()
     assert run("eval", path, "--reference", ref, "-o", deep, "--parents").exit_code == 0
     assert deep.is_file()
+
+
+def test_eval_mcap_review_file_and_the_foxglove_layout(tmp_path: Path, ref: Path) -> None:
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    from scrapcut_cli.toolpath.review import REVIEW_TOPICS
+
+    flags = {2: ["tilted"], 7: ["collision"]}
+    near = REFERENCE + np.array([0, 0, 1 * MM])
+    paths = [
+        write_path(tmp_path / "near.json", near, setpoints_along(near, flags=flags)),
+        write_path(tmp_path / "far.json", REFERENCE + np.array([0, 0, 20 * MM])),
+    ]
+    out = tmp_path / "review.mcap"
+    result = run("eval", *paths, "--reference", ref, "--mcap", out)
+    assert result.exit_code == 0, result.output
+    decoded = {}
+    with out.open("rb") as fh:
+        for _, channel, _, msg in make_reader(
+            fh, decoder_factories=[DecoderFactory()]
+        ).iter_decoded_messages():
+            decoded[channel.topic] = msg
+    # No stitched clouds in a path file; two files: no single nav_msgs/Path curve.
+    assert set(decoded) == set(REVIEW_TOPICS.values()) - {
+        REVIEW_TOPICS["paint"],
+        REVIEW_TOPICS["surface"],
+        REVIEW_TOPICS["curve"],
+    }
+    lines = {m.ns: m for m in decoded[REVIEW_TOPICS["curve_error"]].markers}
+    # 1 mm from the reference is green, 20 mm (beyond the 10 mm threshold) red.
+    assert all(c.g > 0.75 and c.r < 0.25 for c in lines["near.json"].colors)
+    assert all(c.r == 1.0 and c.g == 0.0 for c in lines["far.json"].colors)
+    flagged = {m.ns: len(m.points) for m in decoded[REVIEW_TOPICS["flagged"]].markers}
+    assert flagged == {"near.json/collision": 1, "near.json/tilted": 1}
+    assert len(decoded[REVIEW_TOPICS["torch"]].markers) == 80
+
+    # The layout shipped for Foxglove shows every review topic.
+    layout = json.loads(
+        (Path(__file__).parents[1] / "docs" / "foxglove_layout.json").read_text(encoding="utf-8")
+    )
+    panel = layout["configById"]["3D!scrapcut-review"]
+    assert set(REVIEW_TOPICS.values()) <= set(panel["topics"])
+    assert layout["layout"]["first"] == "3D!scrapcut-review"

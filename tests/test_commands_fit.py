@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -25,7 +26,8 @@ from perception_scenes import (
 from scrapcut_cli.cli import cli
 from scrapcut_cli.geometry import PolylineDistance
 from scrapcut_cli.recording.reader import sha256_first_mib
-from scrapcut_cli.toolpath.pathfile import MCAP_TOPICS, read_path_file
+from scrapcut_cli.toolpath.pathfile import read_path_file
+from scrapcut_cli.toolpath.review import REVIEW_TOPICS
 
 
 def _run(*args: object) -> Result:
@@ -98,7 +100,7 @@ def test_fit_writes_the_path_file_and_every_export(
     np.testing.assert_allclose(tum[:, 1:4], path.positions, atol=1e-15)
     np.testing.assert_allclose(tum[:, 4:], path.orientations_xyzw, atol=1e-15)
     assert np.all(np.diff(tum[:, 0]) > 0)
-    _check_mcap(tmp_path / "out" / "path.mcap", len(path))
+    _check_mcap(tmp_path / "out" / "path.mcap", rec, path)
     if method == "nurbs":
         # geomdl's own format (its evaluation is checked by the fitting tests): the same NURBS
         # as the path file's.
@@ -119,21 +121,41 @@ def test_fit_writes_the_path_file_and_every_export(
     ]
 
 
-def _check_mcap(path: Path, setpoints: int) -> None:
+def _check_mcap(path: Path, rec: Path, cutting: Any) -> None:
+    """The review file: every topic, stamped at the recording's start, torches along z."""
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
-    counts: dict[str, int] = {}
-    poses = 0
+    from scrapcut_cli.geometry import quat_xyzw_to_matrix
+    from scrapcut_cli.recording.reader import open_recording
+
+    with open_recording(rec) as recording:
+        start_ns = recording.start_ns
+    decoded: dict[str, Any] = {}
     with path.open("rb") as fh:
         reader = make_reader(fh, decoder_factories=[DecoderFactory()])
-        for _, channel, _, msg in reader.iter_decoded_messages():
-            counts[channel.topic] = counts.get(channel.topic, 0) + 1
-            assert msg.header.frame_id == "panda_link0"
-            if channel.topic == MCAP_TOPICS["torch"]:
-                poses = len(msg.poses)
-    assert set(counts) == set(MCAP_TOPICS.values())
-    assert poses == setpoints
+        for _, channel, message, msg in reader.iter_decoded_messages():
+            assert channel.topic not in decoded  # one message per topic
+            decoded[channel.topic] = msg
+            assert message.log_time == start_ns  # overlays the recording from its start
+            for stamped in getattr(msg, "markers", [msg]):
+                assert stamped.header.frame_id == "panda_link0"
+                assert stamped.header.stamp.sec * 10**9 + stamped.header.stamp.nanosec == start_ns
+    # The scene carries its reference: the curve is coloured by its distance to it.
+    assert set(decoded) == set(REVIEW_TOPICS.values())
+    arrows = decoded[REVIEW_TOPICS["torch"]].markers
+    assert len(arrows) == len(cutting)
+    for marker, position, quat in zip(
+        arrows, cutting.positions, cutting.orientations_xyzw, strict=True
+    ):
+        tail, head = (np.array([p.x, p.y, p.z]) for p in marker.points)
+        np.testing.assert_allclose(head, position, atol=1e-12)  # ends at the torch tip
+        axis = (head - tail) / np.linalg.norm(head - tail)
+        np.testing.assert_allclose(axis, quat_xyzw_to_matrix(quat)[:, 2], atol=1e-9)
+    (line,) = decoded[REVIEW_TOPICS["curve_error"]].markers
+    assert len(line.colors) == len(line.points) > 2
+    flagged = decoded[REVIEW_TOPICS["flagged"]].markers
+    assert sum(len(m.points) for m in flagged) == sum(len(f) for f in cutting.flags)
 
 
 def _eval_row(path_file: Path, *extra: object) -> dict[str, object]:

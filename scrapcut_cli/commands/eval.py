@@ -80,6 +80,16 @@ _SUFFIX_FORMATS = {".md": "markdown", ".markdown": "markdown", ".csv": "csv", ".
     "(where each sample is), LABEL.setpoints.csv and results.json (as evo's --save_results).",
 )
 @click.option(
+    "--mcap",
+    "mcap_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    metavar="FILE.mcap",
+    help="Write a review file for Foxglove: every curve, the reference, the curves coloured "
+    "by their distance to it, the torches along their axis, the flagged set-points "
+    "(docs/foxglove_layout.json shows them).",
+)
+@click.option(
     "--align",
     is_flag=True,
     help="Also lay each curve rigidly onto the reference (ICP with Umeyama steps, no scale): "
@@ -103,6 +113,7 @@ def eval_cmd(
     paper: bool,
     plot_dir: Path | None,
     results_dir: Path | None,
+    mcap_path: Path | None,
     align: bool,
     coverage_mm: float | None,
     config_path: Path | None,
@@ -152,6 +163,7 @@ def eval_cmd(
         (output, "-o", False),
         (plot_dir, "--plot", True),
         (results_dir, "--save-results", True),
+        (mcap_path, "--mcap", False),
     ):
         if target is None:
             continue
@@ -198,11 +210,52 @@ def eval_cmd(
     if plot_dir is not None:
         written = write_plots(rows, plot_dir)
         err.print(f"wrote {len(written)} figure(s) to {plot_dir}/")
+    if mcap_path is not None:
+        _write_review(paths, rows, mcap_path, config.evaluation.coverage_threshold_m)
+        err.print(f"wrote {mcap_path}", soft_wrap=True, markup=False)
     if results_dir is not None:
         from scrapcut_cli.evaluation.results import write_results
 
         write_results(rows, results_dir)
         err.print(f"wrote per-sample errors of {len(rows)} path file(s) to {results_dir}/")
+
+
+def _write_review(
+    paths: tuple[Path, ...], rows: list[ReportRow], target: Path, error_scale_m: float
+) -> None:
+    """The review MCAP of ``eval --mcap``: each path file against its reference."""
+    from scrapcut_cli.errors import EvaluationError
+    from scrapcut_cli.evaluation.sources import load_path_file
+    from scrapcut_cli.toolpath.review import ReviewPath, write_review_mcap
+
+    files = [load_path_file(p) for p in paths]
+    frames = sorted({f.frame_id for f in files if f.frame_id})
+    if len(frames) > 1:
+        raise EvaluationError(
+            f"--mcap: the path files are in different frames ({', '.join(frames)}); one review "
+            "file shows one frame"
+        )
+    reference = {r.source: r.reference_points for r in rows}
+    review = [
+        ReviewPath(
+            f.name,
+            f.curve_points,
+            f.setpoint_positions,
+            f.setpoint_orientations_xyzw,
+            f.setpoint_flags,
+            reference=reference.get(str(f.path)),
+        )
+        for f in files
+    ]
+    starts = [f.source_start_ns for f in files if f.source_start_ns is not None]
+    write_review_mcap(
+        target,
+        review,
+        frame_id=frames[0] if frames else (rows[0].frame_id if rows else ""),
+        stamp_ns=min(starts, default=0),
+        reference=rows[0].reference_points if rows else None,
+        error_scale_m=error_scale_m,
+    )
 
 
 def alignment_table(rows: list[ReportRow]) -> Table:

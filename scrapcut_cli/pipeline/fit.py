@@ -58,7 +58,9 @@ class FitResult:
     frames_read : int
         Frames the reader delivered (paired, posed); ``reader_skipped`` more were skipped.
     stamp_ns : int
-        Stamp of the last frame (exports are stamped with it).
+        Stamp of the last frame.
+    start_ns : int
+        The recording's start (the review MCAP is stamped with it, to overlay its timeline).
     timings_s : dict
         Wall time of ``read_stitch``, ``fit``, ``toolpath`` and ``total``, seconds.
     calibration : dict, optional
@@ -79,6 +81,7 @@ class FitResult:
     stamp_ns: int = 0
     timings_s: dict[str, float] = field(default_factory=dict)
     calibration: dict[str, Any] | None = None
+    start_ns: int = 0
 
     @property
     def method_params(self) -> dict[str, Any]:
@@ -168,6 +171,7 @@ class StitchedRecording:
     stamp_ns: int
     time_s: float
     calibration: dict[str, Any] | None = None
+    start_ns: int = 0
 
 
 def stitch_recording_file(
@@ -197,6 +201,7 @@ def stitch_recording_file(
         plan = rec.plan()
         hsv = resolve_recording_paint(config.paint, rec.metadata)
         frame_id = rec.base_frame
+        start_ns = rec.start_ns
         done = 0
 
         def step(_: object) -> None:
@@ -216,6 +221,7 @@ def stitch_recording_file(
         "sha256_first_mib": sha256_first_mib(path),
         "frames_used": int(tally.frames_with_paint),
         "frames_skipped": int(plan.skipped + tally.frames - tally.frames_with_paint),
+        "start_ns": int(start_ns),
     }
     return StitchedRecording(
         stitch=stitch,
@@ -226,6 +232,7 @@ def stitch_recording_file(
         stamp_ns=max((s.stamp_ns for s in stitch.steps), default=0),
         time_s=time.perf_counter() - t0,
         calibration=calibration,
+        start_ns=int(start_ns),
     )
 
 
@@ -278,6 +285,7 @@ def fit_stitched(
         reader_skipped=stitched.reader_skipped,
         reader_skip_reasons=dict(stitched.reader_skip_reasons),
         stamp_ns=stitched.stamp_ns,
+        start_ns=stitched.start_ns,
         timings_s={
             "read_stitch": stitched.time_s,
             "fit": t1 - t0,

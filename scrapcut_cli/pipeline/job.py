@@ -283,9 +283,9 @@ class Pipeline:
         from scrapcut_cli.toolpath.pathfile import (
             write_path_csv,
             write_path_file,
-            write_path_mcap,
             write_path_tum,
         )
+        from scrapcut_cli.toolpath.review import ReviewPath, write_review_mcap
 
         job, fit = self.job, self.fit
         if job.output is None or fit is None or self.path_dict is None:
@@ -300,14 +300,24 @@ class Pipeline:
             write_path_tum(fit.path, job.output.with_suffix(".tum"), frame_id=fit.frame_id)
             self.written.append(job.output.with_suffix(".tum"))
         if job.mcap:
-            write_path_mcap(
+            row = self.report.row
+            write_review_mcap(
                 job.output.with_suffix(".mcap"),
-                fit.curve,
-                fit.path,
+                [
+                    ReviewPath(
+                        job.output.name,
+                        fit.curve.points,
+                        fit.path.positions,
+                        fit.path.orientations_xyzw,
+                        fit.path.flags,
+                    )
+                ],
                 frame_id=fit.frame_id,
+                stamp_ns=fit.start_ns,
+                reference=None if row is None else row.reference_points,
                 paint_points=fit.stitch.paint_points,
                 surface_points=fit.stitch.surface_points,
-                stamp_ns=fit.stamp_ns,
+                error_scale_m=fit.config.evaluation.coverage_threshold_m,
             )
             self.written.append(job.output.with_suffix(".mcap"))
         if job.nurbs_json is not None:

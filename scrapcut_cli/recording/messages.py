@@ -13,6 +13,7 @@ import io
 import struct
 import sys
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -33,6 +34,7 @@ PATH = "nav_msgs/msg/Path"
 POSE_ARRAY = "geometry_msgs/msg/PoseArray"
 POINT_CLOUD2 = "sensor_msgs/msg/PointCloud2"
 STRING = "std_msgs/msg/String"
+MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
 JOINT_STATE = "sensor_msgs/msg/JointState"
 
 IMAGE_TYPES = (IMAGE, COMPRESSED_IMAGE)
@@ -294,6 +296,64 @@ def pose_array_msg(
     pts, quats = _poses(positions, orientations_xyzw)
     poses = [_pose(p, q) for p, q in zip(pts, quats, strict=True)]
     return _type(POSE_ARRAY)(header=header(stamp_ns, frame_id), poses=poses)
+
+
+@dataclass(frozen=True)
+class MarkerSpec:
+    """One ``visualization_msgs/Marker`` to draw, in the message's frame (identity pose).
+
+    ``kind`` is the Marker type name (``ARROW``, ``LINE_STRIP``, ``SPHERE_LIST``...);
+    ``points`` (N, 3) metres; ``rgba`` the colour (0-1) or ``colors`` (N, 4) one per point;
+    ``scale`` the marker's x, y, z (an arrow given by two points: shaft and head diameters,
+    head length; a line: its width; spheres: their diameter).
+    """
+
+    ns: str
+    id: int
+    kind: str
+    points: NDArray[np.float64]
+    scale: tuple[float, float, float]
+    rgba: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
+    colors: NDArray[np.float64] | None = None
+    text: str = ""
+
+
+def marker_array_msg(stamp_ns: int, frame_id: str, markers: Sequence[MarkerSpec]) -> Any:
+    """``visualization_msgs/MarkerArray`` of ``markers`` (lifetime 0: they stay)."""
+    marker_type = _type("visualization_msgs/msg/Marker")
+    point, rgba = _type("geometry_msgs/msg/Point"), _type("std_msgs/msg/ColorRGBA")
+    out = []
+    for spec in markers:
+        pts = np.asarray(spec.points, dtype=np.float64).reshape(-1, 3)
+        colors = np.zeros((0, 4)) if spec.colors is None else np.reshape(spec.colors, (-1, 4))
+        out.append(
+            marker_type(
+                header=header(stamp_ns, frame_id),
+                ns=spec.ns,
+                id=int(spec.id),
+                type=int(getattr(marker_type, spec.kind)),
+                action=int(marker_type.ADD),
+                pose=_pose([0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]),
+                scale=_type("geometry_msgs/msg/Vector3")(*(float(v) for v in spec.scale)),
+                color=rgba(*(float(v) for v in spec.rgba)),
+                lifetime=_type("builtin_interfaces/msg/Duration")(sec=0, nanosec=0),
+                frame_locked=False,
+                points=[point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in pts],
+                colors=[rgba(*(float(v) for v in c)) for c in colors],
+                texture_resource="",
+                texture=_type("sensor_msgs/msg/CompressedImage")(
+                    header=header(0, ""), format="", data=np.zeros(0, dtype=np.uint8)
+                ),
+                uv_coordinates=[],
+                text=spec.text,
+                mesh_resource="",
+                mesh_file=_type("visualization_msgs/msg/MeshFile")(
+                    filename="", data=np.zeros(0, dtype=np.uint8)
+                ),
+                mesh_use_embedded_materials=False,
+            )
+        )
+    return _type(MARKER_ARRAY)(markers=out)
 
 
 def pointcloud_msg(

@@ -287,6 +287,19 @@ class McapWriter:
         msg = m.pointcloud_msg(stamp_ns, frame_id, points, rgb)
         self._write(topic, m.POINT_CLOUD2, msg, stamp_ns, log_time_ns)
 
+    def write_marker_array(
+        self,
+        topic: str,
+        stamp_ns: int,
+        frame_id: str,
+        markers: Sequence[m.MarkerSpec],
+        *,
+        log_time_ns: int | None = None,
+    ) -> None:
+        """``visualization_msgs/MarkerArray`` of :class:`~.messages.MarkerSpec` markers."""
+        msg = m.marker_array_msg(stamp_ns, frame_id, markers)
+        self._write(topic, m.MARKER_ARRAY, msg, stamp_ns, log_time_ns)
+
     def write_string(
         self, topic: str, stamp_ns: int, text: str, *, log_time_ns: int | None = None
     ) -> None:

@@ -11,14 +11,16 @@ from scrapcut_cli.toolpath.pathfile import (
     read_path_file,
     write_path_csv,
     write_path_file,
-    write_path_mcap,
+    write_path_tum,
 )
+from scrapcut_cli.toolpath.review import ReviewPath, write_review_mcap
 from scrapcut_cli.toolpath.setpoints import make_cutting_path
 from scrapcut_cli.toolpath.speeds import SpeedTable, load_speed_table
 
 __all__ = [
     "SCHEMA",
     "CuttingPath",
+    "ReviewPath",
     "SpeedTable",
     "load_speed_table",
     "make_cutting_path",
@@ -27,5 +29,6 @@ __all__ = [
     "read_path_file",
     "write_path_csv",
     "write_path_file",
-    "write_path_mcap",
+    "write_path_tum",
+    "write_review_mcap",
 ]

@@ -271,57 +271,6 @@ def write_path_tum(path: CuttingPath, out: str | Path, *, frame_id: str = "") ->
     write_text_atomic(out, "\n".join(lines) + "\n")
 
 
-#: Topics of the MCAP export (base frame), laid out for Foxglove's 3D panel.
-MCAP_TOPICS = {
-    "curve": "/scrapcut/curve",  # nav_msgs/Path: the fitted curve on the surface
-    "torch": "/scrapcut/torch_poses",  # geometry_msgs/PoseArray: every set-point's torch pose
-    "flagged": "/scrapcut/flagged_poses",  # geometry_msgs/PoseArray: tilted / colliding ones
-    "paint": "/scrapcut/cloud/paint",  # sensor_msgs/PointCloud2: stitched paint
-    "surface": "/scrapcut/cloud/surface",  # sensor_msgs/PointCloud2: stitched surface band
-}
-PAINT_RGB = (255, 110, 0)
-SURFACE_RGB = (150, 150, 150)
-
-
-def write_path_mcap(
-    target: str | Path,
-    curve: Curve,
-    path: CuttingPath,
-    *,
-    frame_id: str,
-    paint_points: NDArray[np.float64],
-    surface_points: NDArray[np.float64],
-    stamp_ns: int = 0,
-) -> None:
-    """The path for Foxglove: curve, torch poses and the stitched clouds in one MCAP (atomic).
-
-    ``paint_points`` (N, 3) and ``surface_points`` (M, 3) are metres in ``frame_id``; every
-    message carries ``stamp_ns`` (e.g. the recording's last frame) so the file is reproducible.
-    """
-    from scrapcut_cli.recording.writer import McapWriter
-
-    flagged = np.array([bool(f) for f in path.flags], dtype=bool)
-    with McapWriter(target) as writer:
-        writer.write_path(MCAP_TOPICS["curve"], stamp_ns, frame_id, curve.points)
-        writer.write_pose_array(
-            MCAP_TOPICS["torch"], stamp_ns, frame_id, path.positions, path.orientations_xyzw
-        )
-        writer.write_pose_array(
-            MCAP_TOPICS["flagged"],
-            stamp_ns,
-            frame_id,
-            path.positions[flagged],
-            path.orientations_xyzw[flagged],
-        )
-        for key, points, rgb in (
-            ("paint", paint_points, PAINT_RGB),
-            ("surface", surface_points, SURFACE_RGB),
-        ):
-            pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-            colours = np.tile(np.array(rgb, dtype=np.uint8), (len(pts), 1))
-            writer.write_pointcloud(MCAP_TOPICS[key], stamp_ns, frame_id, pts, colours)
-
-
 # --------------------------------------------------------------------------- helpers
 
 
