@@ -11,6 +11,9 @@ $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	# `import open3d` works in this venv without a system libusb (docs/python.md).
+	$(BIN)/python -c "import pathlib, sysconfig; pathlib.Path(sysconfig.get_paths()['purelib'], \
+		'scrapcut_open3d.pth').write_text('import scrapcut_cli._open3d_hook\n')"
 	touch $(STAMP)
 
 demo: $(STAMP)

@@ -11,7 +11,7 @@ A TOML file has one table per stage, named as the fields of :class:`ScrapcutConf
 Precedence: built-in defaults < ``--config FILE`` < command-line options. The resolved
 configuration is saved next to every result (path files, reproduce reports).
 
-Units follow DESIGN.md: metres, radians, seconds inside; a name ending in ``_mm`` or ``_deg``
+Units follow docs/design.md: metres, radians, seconds inside; a name ending in ``_mm`` or ``_deg``
 says otherwise.
 
 Every numeric parameter declares its range where it is declared, from the physics of the cell
@@ -80,7 +80,7 @@ def choice_names(choices: type[enum.StrEnum]) -> tuple[str, ...]:
 class RecordingConfig:
     """Which topics to read and how to pair and pose frames."""
 
-    color_topic: str | None = None  # None: first default of DESIGN.md that exists
+    color_topic: str | None = None  # None: first default of docs/design.md that exists
     depth_topic: str | None = None
     info_topic: str | None = None
     base_frame: str | None = None  # None: the TF root
@@ -949,7 +949,7 @@ class CalibrationConfig:
 
 @dataclass(frozen=True)
 class EvaluationConfig:
-    """The error report of DESIGN.md: reference sampling and coverage threshold."""
+    """The error report of docs/design.md: reference sampling and coverage threshold."""
 
     sample_spacing_m: float = rng(
         0.001,

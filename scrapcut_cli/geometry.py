@@ -1,6 +1,6 @@
 """Rigid transforms, quaternions, polylines and nearest-point queries.
 
-Conventions (DESIGN.md): ``T_a_b`` is a (4, 4) float64 matrix mapping points expressed in frame
+Conventions (docs/design.md): ``T_a_b`` is a (4, 4) float64 matrix mapping points expressed in frame
 ``b`` into frame ``a``; quaternions are (x, y, z, w) as ROS has them; lengths are metres.
 """
 

@@ -22,6 +22,7 @@ from perception_scenes import (
     top_view,
     write_scene_recording,
 )
+from test_docs import check_path_file
 
 from scrapcut_cli.cli import cli
 from scrapcut_cli.geometry import PolylineDistance
@@ -69,6 +70,7 @@ def test_fit_writes_the_path_file_and_every_export(
     assert result.exit_code == 0, result.output
     summary = json.loads(result.stdout)
     curve, path, meta = read_path_file(out)
+    check_path_file(json.loads(out.read_text()))  # docs/path.schema.json holds for real files
 
     assert meta["method"]["name"] == method
     assert meta["source"]["path"] == str(rec)

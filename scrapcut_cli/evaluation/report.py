@@ -208,7 +208,7 @@ def worse_than_paper(row: ReportRow, paper: PaperFigures) -> list[str]:
 def rows_to_records(
     rows: Sequence[ReportRow], *, paper: PaperTable | None = None
 ) -> list[dict[str, Any]]:
-    """JSON-ready dictionaries, one per row (the fixed keys of DESIGN.md first)."""
+    """JSON-ready dictionaries, one per row (the fixed keys of docs/path-file.md first)."""
     records = []
     for row in sort_rows(rows):
         figures = row.figures_mm()
@@ -252,7 +252,7 @@ EVAL_SCHEMA = "scrapcut.eval/v1"
 
 def render_json(rows: Sequence[ReportRow], *, paper: PaperTable | None = None) -> str:
     """``scrapcut eval --json``: one object, ``schema``, ``tool_version`` and ``rows`` (one
-    dictionary per path file, the keys of DESIGN.md's error report first)."""
+    dictionary per path file, the keys of docs/path-file.md's error report first)."""
     from scrapcut_cli import __version__
 
     data = {

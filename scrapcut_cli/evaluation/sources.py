@@ -1,8 +1,9 @@
 """What gets evaluated: path files and references, read from disk, and the evaluation recipe.
 
 This is the evaluation's input layer (as ``recording/`` is the pipeline's): path files are
-``scrapcut.path/v1`` JSON (DESIGN.md); a reference is a recording with /scrapcut/reference or a
-CSV with the header ``x,y,z`` (metres, base frame, ordered along the curve).
+``scrapcut.path/v1`` JSON (docs/path-file.md); a reference is a recording with
+/scrapcut/reference or a CSV with the header ``x,y,z`` (metres, base frame, ordered along
+the curve).
 
 A closed reference (a ring, a cut-out) is scored as a loop. A recording says so in its
 ``scrapcut_reference`` metadata (the simulator writes ``closed`` and the arcs no image showed,

@@ -98,7 +98,7 @@ PAINT_PRESETS: dict[str, PaintPreset] = {
 def resolve_paint(config: PaintConfig) -> HsvRange:
     """The HSV range for a paint configuration: explicit ``hsv`` wins over the preset name.
 
-    No preset chosen (``None``) means orange, the default of DESIGN.md.
+    No preset chosen (``None``) means orange, the default of docs/design.md.
     """
     if config.hsv is not None:
         try:  # a [paint] table in a TOML file is not checked by the command line's parser

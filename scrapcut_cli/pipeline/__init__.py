@@ -1,6 +1,6 @@
 """The pipeline: one job end to end (recording → path → error), and the engine that runs many.
 
-This package is the only orchestration (DESIGN.md): ``fit``, ``explore`` replay, ``reproduce``
+This package is the only orchestration (docs/design.md): ``fit``, ``explore`` replay, ``reproduce``
 and ``batch`` all run :class:`~scrapcut_cli.pipeline.job.Pipeline` jobs; the stage packages
 (``perception``, ``fitting``, ``toolpath``, ``evaluation``) know nothing of each other.
 

@@ -1,6 +1,6 @@
 """One job end to end: recording → stitched clouds → curve → cutting path → error → files.
 
-:class:`Pipeline` is the only orchestration of a fit (DESIGN.md): ``scrapcut fit`` runs one,
+:class:`Pipeline` is the only orchestration of a fit (docs/design.md): ``scrapcut fit`` runs one,
 ``scrapcut explore`` runs one on the planner's own stitched clouds, ``reproduce`` runs one per
 method on each simulated scan, and ``batch`` runs thousands on Dask workers. Its :meth:`run
 <Pipeline.run>` reads like a table of contents; each step is a short method, and the reference

@@ -42,7 +42,7 @@ from scrapcut_cli.recording.salvage import SalvageReport, salvage_mcap
 from scrapcut_cli.recording.structure import Damaged, check_mcap, check_ros1
 from scrapcut_cli.recording.tf import TfBuffer
 
-#: Default topics, first that exists wins (DESIGN.md: realsense-ros 4.x, then ROS 1 names).
+#: Default topics, first that exists wins (docs/design.md: realsense-ros 4.x, then ROS 1 names).
 COLOR_TOPICS = (
     "/camera/camera/color/image_raw",
     "/camera/color/image_raw",

@@ -41,7 +41,7 @@ class RecordingSummary:
     salvaged: str | None = None  # what --salvage kept of a damaged MCAP
 
     def to_json(self) -> dict[str, Any]:
-        """The fixed keys of DESIGN.md (``format`` ... ``has_exploration_log``) plus extras."""
+        """The fixed keys of docs/design.md (``format`` ... ``has_exploration_log``) plus extras."""
         cam = self.camera
         return {
             "path": str(self.path),

@@ -21,7 +21,7 @@ where a worker points the robot: a view of the line at the start fraction, moved
 count crashes: contacts of the robot or camera with the true piece or the floor at each
 executed view and along each move (``RecordResult.collisions``), and the closest approach.
 
-What is written (DESIGN.md, realsense-ros 4.x names)
+What is written (docs/design.md, realsense-ros 4.x names)
 ----------------------------------------------------
 * ``/camera/camera/color/image_raw`` rgb8, ``/camera/camera/aligned_depth_to_color/image_raw``
   16UC1 mm (0 = invalid; or 32FC1 m), ``/camera/camera/color/camera_info`` with every image.

@@ -1,7 +1,8 @@
 """The path file (``scrapcut.path/v1`` JSON, docs/path-file.md) and its CSV and TUM exports.
 
-Fixed keys are the ones DESIGN.md lists; this module adds ``curve.spacing_m``, ``curve.info``,
-``path.summary`` and a per-set-point ``surface_point`` (all optional when reading). Floats are
+Fixed keys are the ones docs/path-file.md lists (docs/path.schema.json); this module adds
+``curve.spacing_m``, ``curve.info``, ``path.summary`` and a per-set-point ``surface_point`` (all
+optional when reading). Floats are
 written with Python's shortest round-trip repr, so a file read back gives the same numbers.
 
 A set-point's ``flags`` are empty or name what the operator should look at: ``tilted`` (the
