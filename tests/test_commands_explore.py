@@ -50,6 +50,7 @@ def test_replay_prints_the_steps_and_verifies_them(explored: tuple[Path, LoopRes
     result = _run("explore", path)
     assert result.exit_code == 0, result.output
     assert "matches the log" in result.stdout
+    assert "verdict: the replay matches the log" in result.stderr
     assert "coverage 100.0 %" in result.stdout
     for word in ("extrapolate", "return", "done"):
         assert word in result.stdout
@@ -62,7 +63,7 @@ def test_replay_prints_the_steps_and_verifies_them(explored: tuple[Path, LoopRes
     assert [s["growth"] for s in data["steps"]] == [e["growth"] for e in loop.log]
 
 
-def test_a_divergence_exits_1_with_one_line(
+def test_a_divergence_is_a_verdict_with_exit_code_3(
     explored: tuple[Path, LoopResult], tmp_path: Path
 ) -> None:
     _, loop = explored
@@ -71,8 +72,10 @@ def test_a_divergence_exits_1_with_one_line(
     bad = tmp_path / "bad.mcap"
     write_exploration_recording(bad, loop.frames, log, reference=CylinderScan().reference)
     result = _run("explore", bad)
-    line = one_line_error(result)
+    assert result.exit_code == 3, result.output  # a finding, not an error (1)
+    (line,) = [x for x in result.stderr.splitlines() if x.startswith("verdict:")]
     assert "diverged from the log" in line and "step 1: size" in line
+    assert "Traceback" not in result.output and "error" not in result.stderr
     assert "differs" in result.stdout  # the table marks the step
 
 

@@ -27,6 +27,8 @@ if TYPE_CHECKING:
     from scrapcut_cli.pipeline.job import JobResult
 
 METHODS = choice_names(FitMethod)
+#: Exit code of a replay that diverged from its log (a finding; 1 stays a known error).
+DIVERGED = 3
 
 
 @click.command("explore")
@@ -151,9 +153,12 @@ def explore(
 
     On an exploration recording (scrapcut record --mode explore) every decision is recomputed
     from the recorded frames, the reachability answers come from the log, and each decision is
-    compared with the logged one; a divergence exits with status 1. With --what-if the planner
-    runs with the given parameters over any recording's frames (a survey is dense enough) and
-    reports the views it would take, the endpoints it finds and the coverage of the final fit.
+    compared with the logged one; a divergence is reported and exits with status 3 (1 stays an
+    error: an unreadable recording, a bad option). The method is read from the log.
+
+    With --what-if the planner runs with the given parameters over any recording's frames (a
+    survey is dense enough) and reports the views it would take, the endpoints it finds and the
+    coverage of the final fit.
     With -o, the global fit over the frames the planner used is written as a path file, with
     its error report beside it when a reference is at hand. --calibration poses the frames of
     the global fit (and of a what-if run) with a saved camera mount and clock offset; a replay
@@ -241,12 +246,17 @@ def explore(
     if fitted.failure:
         err.print(f"[yellow]note:[/] the global fit failed: {fitted.failure}")
     if run.divergences:
-        from scrapcut_cli.errors import ExplorationError
-
-        raise ExplorationError(
-            f"the replay diverged from the log in {len(run.divergences)} place(s); first: "
-            f"{run.divergences[0]}"
+        # A finding about the recording, not a failure of the command: the replay ran and the
+        # report above is complete. A distinct exit code lets scripts tell it from an error.
+        err.print(
+            f"verdict: the replay diverged from the log in {len(run.divergences)} place(s); "
+            f"first: {run.divergences[0]}",
+            soft_wrap=True,
+            markup=False,
         )
+        raise click.exceptions.Exit(DIVERGED)
+    if not what_if_mode:
+        err.print("verdict: the replay matches the log", markup=False)
 
 
 def _render(run: ExplorationRun, fitted: JobResult) -> None:
