@@ -246,8 +246,14 @@ def test_align_separates_calibration_from_shape_error(tmp_path: Path, ref: Path)
         np.degrees(Rotation.from_matrix(rotation).magnitude()), abs=0.02
     )
     assert row["align_translation_mm"] == pytest.approx(np.linalg.norm([4, -1, 1]), abs=0.1)
-    result = run("eval", path, "--reference", ref, "--align")
+    page = tmp_path / "report.html"
+    result = run("eval", path, "--reference", ref, "--align", "--html", page)
     assert "shape error vs calibration error" in " ".join(result.stdout.split())
+    # One page to share: the table, the alignment, both figures embedded (no other file).
+    text = page.read_text()
+    assert text.startswith("<!DOCTYPE html>") and "<td>cut.json</td>" in text
+    assert "After rigid alignment" in text and text.count("<table>") == 2
+    assert text.count('src="data:image/png;base64,') == 2 and "plots/" not in text
 
 
 def test_umeyama_recovers_a_rigid_motion_and_a_straight_line_has_no_roll() -> None:

@@ -39,6 +39,7 @@ def test_reproduce_writes_every_output(small_run: tuple[Path, Result]) -> None:
         "plots",
         "recordings",
         "report.csv",
+        "report.html",
         "report.json",
         "report.md",
     ]
@@ -91,6 +92,10 @@ def test_reproduce_writes_every_output(small_run: tuple[Path, Result]) -> None:
     assert "| cylinder | skeleton 20 mm (oracle views) |" in markdown
     assert all(r["oracle_views"] and "oracle views" in r["label"] for r in report["rows"])
     assert "oracle_views" in (out / "report.csv").read_text().splitlines()[0]
+    # The same report as one page: tables rendered, all six figures embedded.
+    page = (out / "report.html").read_text()
+    assert page.count("<table>") == markdown.count("\n|---") and "<td>cylinder</td>" in page
+    assert page.count('src="data:image/png;base64,') == 6 and "plots/" not in page
     # Every path file comes with its error report, the row's own figures.
     error = json.loads((out / "paths" / "cylinder_nurbs.error.json").read_text())
     assert error["mean_mm"] == rows[("cylinder", "nurbs")]["mean_mm"]

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -80,6 +80,15 @@ _SUFFIX_FORMATS = {".md": "markdown", ".markdown": "markdown", ".csv": "csv", ".
     "(where each sample is), LABEL.setpoints.csv and results.json (as evo's --save_results).",
 )
 @click.option(
+    "--html",
+    "html_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    metavar="FILE.html",
+    help="Write one self-contained HTML page: the table, the warnings and the figures "
+    "(embedded), to share as one file.",
+)
+@click.option(
     "--mcap",
     "mcap_path",
     type=click.Path(dir_okay=False, path_type=Path),
@@ -114,6 +123,7 @@ def eval_cmd(
     plot_dir: Path | None,
     results_dir: Path | None,
     mcap_path: Path | None,
+    html_path: Path | None,
     align: bool,
     coverage_mm: float | None,
     config_path: Path | None,
@@ -164,6 +174,7 @@ def eval_cmd(
         (plot_dir, "--plot", True),
         (results_dir, "--save-results", True),
         (mcap_path, "--mcap", False),
+        (html_path, "--html", False),
     ):
         if target is None:
             continue
@@ -210,6 +221,9 @@ def eval_cmd(
     if plot_dir is not None:
         written = write_plots(rows, plot_dir)
         err.print(f"wrote {len(written)} figure(s) to {plot_dir}/")
+    if html_path is not None:
+        _write_html(rows, html_path, paper=table1, align=align)
+        err.print(f"wrote {html_path}", soft_wrap=True, markup=False)
     if mcap_path is not None:
         _write_review(paths, rows, mcap_path, config.evaluation.coverage_threshold_m)
         err.print(f"wrote {mcap_path}", soft_wrap=True, markup=False)
@@ -218,6 +232,51 @@ def eval_cmd(
 
         write_results(rows, results_dir)
         err.print(f"wrote per-sample errors of {len(rows)} path file(s) to {results_dir}/")
+
+
+def _write_html(rows: list[ReportRow], target: Path, *, paper: Any, align: bool) -> None:
+    """``eval --html``: the markdown report, the warnings and the figures in one page."""
+    import tempfile
+
+    from scrapcut_cli._io import write_text_atomic
+    from scrapcut_cli.evaluation.html import markdown_to_html
+    from scrapcut_cli.evaluation.plots import write_plots
+    from scrapcut_cli.evaluation.report import render_markdown, sort_rows
+
+    parts = ["# Path error (Table I)", "", render_markdown(rows, paper=paper, detail=True)]
+    warnings = [f"- **{r.name}**: {w}" for r in sort_rows(rows) for w in r.warnings]
+    if warnings:
+        parts += ["## Warnings", "", *warnings, ""]
+    if align:
+        parts += ["## After rigid alignment (--align)", "", _alignment_markdown(rows), ""]
+    with tempfile.TemporaryDirectory(prefix="scrapcut-html-") as folder:
+        figures = write_plots(rows, Path(folder) / "plots")
+        images = {f"plots/{p.name}": p.read_bytes() for p in figures}
+    if images:
+        parts += ["## Figures", "", *(f"![{Path(k).stem}]({k})" for k in sorted(images)), ""]
+    page = markdown_to_html("\n".join(parts), title="scrapcut eval", images=images)
+    write_text_atomic(target, page)
+
+
+def _alignment_markdown(rows: list[ReportRow]) -> str:
+    """The --align table as markdown (file, shape error, calibration error)."""
+    from scrapcut_cli.evaluation.report import sort_rows
+
+    lines = [
+        "| File | Mean [mm] | RMSE [mm] | Max [mm] | Translation [mm] | Rotation [deg] |",
+        "|---|---:|---:|---:|---:|---:|",
+    ]
+    for row in sort_rows(rows):
+        f = row.aligned_mm()
+        if f is None:
+            lines.append(f"| {row.name} | — | — | — | — | — |")
+            continue
+        lines.append(
+            f"| {row.name} | {f['aligned_mean_mm']:.2f} | {f['aligned_rmse_mm']:.2f} | "
+            f"{f['aligned_max_mm']:.2f} | {f['align_translation_mm']:.2f} | "
+            f"{f['align_rotation_deg']:.2f} |"
+        )
+    return "\n".join(lines)
 
 
 def _write_review(

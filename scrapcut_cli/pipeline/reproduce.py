@@ -28,7 +28,7 @@ The output folder is built under a temporary name and renamed at the end::
     DIR/paths/<object>_<method>.json the path files (scrapcut.path/v1) and their .error.json/.md
     DIR/paths/<object>_<method>_selfcal.json     the self-calibrated fits
     DIR/paths/<object>_skeleton_leaf<N>mm.json   the leaf-size sweep
-    DIR/report.md, report.json, report.csv
+    DIR/report.md, report.html (figures embedded), report.json, report.csv
     DIR/plots/*.png                  error along the curve, paths, leaf sizes (first seed)
     DIR/config.toml                  the stage parameters (usable as --config)
     DIR/config.json                  the same plus the reproduce options
@@ -790,6 +790,12 @@ def _write_reports(
     if figures:
         markdown += "\n".join(figure_lines) + "\n"
     write_text_atomic(out_dir / "report.md", markdown)
+    from scrapcut_cli.evaluation.html import markdown_to_html
+
+    # The same report as one page to share, the figures embedded.
+    images = {f"plots/{p.name}": p.read_bytes() for p in figures}
+    page = markdown_to_html(markdown, title="scrapcut reproduce: Table I", images=images)
+    write_text_atomic(out_dir / "report.html", page)
     write_text_atomic(out_dir / "report.csv", render_csv(rows, paper=paper))
     report = {
         "schema": REPORT_SCHEMA,
