@@ -242,7 +242,7 @@ def test_stitch_and_filter_on_a_full_disk_commit_nothing(tmp_path: Path) -> None
             assert "written incompletely (is the disk full?)" in line
             assert not out.exists() or list(out.iterdir()) == []
         # Python's own writes fail loudly (EFBIG here, ENOSPC on a full disk): named, one line.
-        line = one_line_error(run("fit", rec, "-o", out / "path.json"))
+        line = one_line_error(run("fit", rec, "-o", out / "path.json", "--parents"))
         assert line.endswith(f"File too large: {out / 'path.json'}"), line
 
     under_file_size_limit(8000, check)

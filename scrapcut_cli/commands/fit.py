@@ -251,11 +251,6 @@ def fit(
     from scrapcut_cli.pipeline.evaluate import error_report_paths
     from scrapcut_cli.pipeline.job import Job, Pipeline
 
-    if output.suffix.lower() != ".json":
-        raise click.UsageError(
-            f"-o {output}: a path file is JSON; name it {output.with_suffix('.json').name} "
-            "(--csv, --tum and --mcap write their files beside it)"
-        )
     csv_path = output.with_suffix(".csv") if write_csv else None
     tum_path = output.with_suffix(".tum") if write_tum else None
     mcap_path = output.with_suffix(".mcap") if write_mcap else None
@@ -275,6 +270,11 @@ def fit(
         # /dev/null, a FIFO, a link loop.
         option = "--nurbs-json" if target == nurbs_json else "-o"
         prepare_output(target, force=force, parents=parents, option=option)
+    if output.suffix.lower() != ".json":
+        raise click.UsageError(
+            f"-o {output}: a path file is JSON; name it {output.with_suffix('.json').name} "
+            "(--csv, --tum and --mcap write their files beside it)"
+        )
 
     stage, shared = split_stage_options(shared)
     config = apply_stage_options(build_config(config_path, **shared), stage)
