@@ -30,7 +30,7 @@ def write_path_file(
     params: dict[str, Any] | None = None,
     source: str | None = "scan.mcap",
 ) -> Path:
-    """A minimal ``scrapcut.path/v1`` file (DESIGN.md keys; no set-points needed here)."""
+    """A minimal ``scrapcut.path/v1`` file (docs/path-file.md keys; no set-points needed here)."""
     data = {
         "schema": "scrapcut.path/v1",
         "source": {"path": source},

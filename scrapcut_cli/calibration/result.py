@@ -4,7 +4,7 @@
 decision a user acts on: when every determined parameter's correction is within three standard
 deviations (or within ``consistent_*``, below what moves a path measurably) of zero, the
 published calibration is consistent and stays as it is; otherwise the corrected mount replaces
-it. :meth:`Calibration.to_dict` is ``scrapcut calibrate --json`` (fixed keys, DESIGN.md).
+it. :meth:`Calibration.to_dict` is ``scrapcut calibrate --json`` (fixed keys, docs/design.md).
 """
 
 from __future__ import annotations
@@ -142,7 +142,7 @@ class Calibration:
         return out[::-1]
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: the keys of ``scrapcut calibrate --json`` (DESIGN.md) and more."""
+        """JSON-ready: the keys of ``scrapcut calibrate --json`` (docs/design.md) and more."""
         s = self.solution
         x = s.correction
         sigma = [None if not math.isfinite(v) else float(v) for v in s.sigma]
