@@ -66,7 +66,9 @@ def calibrated(
     cal = tmp_path_factory.mktemp("cal") / "cal.yaml"
     result = _run("calibrate", path, "--json", "-o", cal)
     assert result.exit_code == 0, result.output
-    return json.loads(result.stdout), cal
+    data = json.loads(result.stdout)
+    assert data["schema"] == "scrapcut.calibration/v1" and data["tool_version"]
+    return data, cal
 
 
 def test_calibrate_prints_the_fixed_keys_and_finds_the_injected_error(

@@ -55,6 +55,7 @@ def test_replay_prints_the_steps_and_verifies_them(explored: tuple[Path, LoopRes
     for word in ("extrapolate", "return", "done"):
         assert word in result.stdout
     data = json.loads(_run("explore", path, "--json").stdout)
+    assert data["schema"] == "scrapcut.explore/v1" and data["tool_version"]
     assert data["matches_log"] is True and data["mode"] == "replay"
     assert data["views"] == len(loop.frames) and data["endpoints_found"] == 2
     assert data["error"]["coverage"] >= 0.95

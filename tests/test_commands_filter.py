@@ -63,6 +63,7 @@ def test_mcap_output_holds_one_base_frame_cloud_per_frame(
     code, out, err = run("filter", str(path), "-o", str(target), "--surface", "--json")
     assert code == 0, err
     summary = json.loads(out)
+    assert summary["schema"] == "scrapcut.filter/v1" and summary["tool_version"]
     assert summary["frames"] == 6 and summary["frames_with_paint"] == 5
     assert summary["skip_reasons"] == {"no_paint": 1}
     hsv = PAINT_PRESETS["orange"].hsv

@@ -69,6 +69,7 @@ def test_fit_writes_the_path_file_and_every_export(
     result = _run("fit", *args)
     assert result.exit_code == 0, result.output
     summary = json.loads(result.stdout)
+    assert summary["schema"] == "scrapcut.fit/v1" and summary["tool_version"]
     curve, path, meta = read_path_file(out)
     check_path_file(json.loads(out.read_text()))  # docs/path.schema.json holds for real files
 

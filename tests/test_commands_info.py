@@ -43,6 +43,7 @@ def test_json_has_the_fixed_keys(recording: Path, scan: SyntheticScan) -> None:
     result = _run(str(recording), "--json")
     assert result.exit_code == 0, result.output
     data = json.loads(result.stdout)
+    assert data["schema"] == "scrapcut.info/v1" and data["tool_version"]
     fixed = {
         "format",
         "duration_s",

@@ -98,8 +98,12 @@ def test_config_file_sets_simulator_parameters(tmp_path: Path) -> None:
     config = tmp_path / "sim.toml"
     config.write_text("[sim]\nobject = 'slanted'\nviews = 1\nwidth = 32\nheight = 24\n")
     out = tmp_path / "s.mcap"
-    result = CliRunner().invoke(cli, ["record", "--config", str(config), "-o", str(out)])
+    result = CliRunner().invoke(cli, ["record", "--config", str(config), "-o", str(out), "--json"])
     assert result.exit_code == 0, result.output
+    printed = json.loads(result.stdout)  # strict JSON: an infinite clearance is null
+    assert printed["schema"] == "scrapcut.record/v1" and printed["tool_version"]
+    assert printed["object"] == "slanted" and printed["path"] == str(out)
+    assert printed["size_bytes"] == out.stat().st_size
     with open_recording(out) as rec:
         assert rec.metadata["scrapcut"]["object"] == "slanted"
 

@@ -158,8 +158,11 @@ def fast_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     folder = tmp_path_factory.mktemp("fast")
     for method, objects in FAST.items():
         result = run("reproduce", "--objects", objects, "--methods", method, *FAST_OPTIONS,
-                     "-o", folder / method)  # fmt: skip
+                     "-o", folder / method, "--json")  # fmt: skip
         assert result.exit_code == 0, result.output
+        printed = json.loads(result.stdout)  # --json prints report.json, nothing else
+        assert printed["schema"] == "scrapcut.reproduce/v1" and printed["tool_version"]
+        assert printed == json.loads((folder / method / "report.json").read_text())
     return {method: folder / method for method in FAST}
 
 

@@ -53,6 +53,7 @@ def test_stitch_writes_the_libraries_cloud_and_growth_json(recording: Path, tmp_
     )
     assert code == 0, err
     summary = json.loads(out)
+    assert summary["schema"] == "scrapcut.stitch/v1" and summary["tool_version"]
     with open_recording(recording) as rec:
         expected = stitch_recording(rec.frames(), PAINT_PRESETS["orange"].hsv, ScrapcutConfig())
     assert summary["size"] == expected.size == len(read_points(cloud))

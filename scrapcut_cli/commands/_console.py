@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import json
+import math
+from collections.abc import Mapping
+from typing import Any
+
 from rich.console import Console
 from rich.progress import (
     BarColumn,
@@ -43,3 +48,23 @@ def print_table(table: object) -> None:
         out.print(table)
     else:
         Console(width=natural.maximum, highlight=False, soft_wrap=True).print(table)
+
+
+def json_document(schema: str, data: Mapping[str, Any]) -> str:
+    """A command's ``--json`` output: ``schema`` (``data``'s own if it has one), then
+    ``tool_version``, then ``data``; non-finite floats become null (strict JSON)."""
+    from scrapcut_cli import __version__
+
+    document: dict[str, Any] = {"schema": data.get("schema", schema), "tool_version": __version__}
+    document.update((k, v) for k, v in data.items() if k not in document)
+    return json.dumps(_finite(document), indent=2)
+
+
+def _finite(value: Any) -> Any:
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -78,7 +77,9 @@ def calibrate(
     if as_json:
         data = result.to_dict()
         data["output"] = None if output is None else str(output)
-        click.echo(json.dumps(data, indent=2))
+        from scrapcut_cli.commands._console import json_document
+
+        click.echo(json_document("scrapcut.calibration/v1", data))
     else:
         _render(result)
         if output is not None:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -238,7 +237,9 @@ def explore(
         data["curve_length_mm"] = None if fitted.fit is None else 1000.0 * fitted.fit.curve.length
         for key in ("error", "error_status", "error_report"):
             data[key] = summary[key]
-        click.echo(json.dumps(data, indent=2))
+        from scrapcut_cli.commands._console import json_document
+
+        click.echo(json_document("scrapcut.explore/v1", data))
     else:
         _render(run, fitted)
         if fitted.written:

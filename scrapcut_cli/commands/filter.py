@@ -222,7 +222,9 @@ def filter_cmd(
         **tally.to_dict(),
     }
     if as_json:
-        out.print_json(json.dumps(summary))
+        from scrapcut_cli.commands._console import json_document
+
+        out.print_json(json_document("scrapcut.filter/v1", summary))
         return
     _render(tally, plan)
     if output is not None:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -329,7 +328,9 @@ def fit(
 
     summary = result.summary()
     if as_json:
-        click.echo(json.dumps(summary, indent=2))
+        from scrapcut_cli.commands._console import json_document
+
+        click.echo(json_document("scrapcut.fit/v1", summary))
     else:
         _render(summary)
     if summary["flagged"]:

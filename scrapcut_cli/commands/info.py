@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -51,7 +50,9 @@ def info(
     )
     summary = summarize_recording(recording, config.recording)
     if as_json:
-        click.echo(json.dumps(summary.to_json(), indent=2))
+        from scrapcut_cli.commands._console import json_document
+
+        click.echo(json_document("scrapcut.info/v1", summary.to_json()))
     else:
         render(summary)
 

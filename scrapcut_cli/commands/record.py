@@ -138,6 +138,12 @@ METHODS = choice_names(FitMethod)
     default=None,
     help="MCAP file to write.",
 )
+@click.option(
+    "--json",
+    "as_json",
+    is_flag=True,
+    help="Print what was recorded as JSON (scrapcut.record/v1) instead of the table.",
+)
 def record(
     object_name: str | None,
     mode: str | None,
@@ -161,6 +167,7 @@ def record(
     motion_frames_hz: float | None,
     config_path: Path | None,
     output: Path | None,
+    as_json: bool,
 ) -> None:
     """Simulate a scan of a spray-painted scrap piece: a Panda with a D435i on its hand.
 
@@ -232,6 +239,16 @@ def record(
             bar.update(task, completed=done, total=total)
 
         result = record_scan(sim, output, progress=advance, planner_factory=factory)
+    if as_json:
+        import dataclasses
+
+        from scrapcut_cli.commands._console import json_document
+
+        data = {k: getattr(result, k) for k in (f.name for f in dataclasses.fields(result))}
+        data["path"] = str(result.path)
+        data["size_bytes"] = result.path.stat().st_size
+        click.echo(json_document("scrapcut.record/v1", data))
+        return
     _print_result(out, result)
 
 

@@ -131,6 +131,12 @@ def _names(values: tuple[str, ...]) -> list[str]:
     required=True,
     help="Output folder (replaced if it holds an earlier reproduce run).",
 )
+@click.option(
+    "--json",
+    "as_json",
+    is_flag=True,
+    help="Print DIR/report.json (scrapcut.reproduce/v1) instead of the table.",
+)
 @config_option
 def reproduce(
     objects: tuple[str, ...],
@@ -151,6 +157,7 @@ def reproduce(
     readme: Path | None,
     readme_section: str,
     out_dir: Path,
+    as_json: bool,
     config_path: Path | None,
 ) -> None:
     """Simulate, fit and evaluate the paper's objects; print Table I beside the paper's.
@@ -222,13 +229,18 @@ def reproduce(
                 else "scrapcut reproduce",
             )
     paper = load_paper_table()
-    if len(result.seeds) > 1:
-        table = interval_rich_table(
-            aggregate_rows(result.rows), paper=paper, title="Table I (ours: mean ± 95 % interval)"
+    if as_json:
+        click.echo((out_dir / "report.json").read_text(encoding="utf-8"), nl=False)
+    elif len(result.seeds) > 1:
+        print_table(
+            interval_rich_table(
+                aggregate_rows(result.rows),
+                paper=paper,
+                title="Table I (ours: mean ± 95 % interval)",
+            )
         )
     else:
-        table = rich_table(result.rows, paper=paper, title="Table I (ours vs paper)")
-    print_table(table)
+        print_table(rich_table(result.rows, paper=paper, title="Table I (ours vs paper)"))
     failed = [r for r in result.rows if r.failure]
     if failed:
         err.print(f"[yellow]{len(failed)} row(s) failed; see the Note column[/yellow]")
@@ -240,7 +252,10 @@ def reproduce(
             readme, replace_marked_section(text, readme_section, result.table_markdown)
         )
         err.print(f"rewrote the '{readme_section}' section of {readme}")
-    out.print(f"wrote {out_dir}/ in {result.wall_time_s:.1f} s (report.md, report.json, plots/)")
+    (err if as_json else out).print(
+        f"wrote {out_dir}/ in {result.wall_time_s:.1f} s (report.md, report.html, report.json, "
+        "plots/)"
+    )
 
 
 def _leaf_sizes_m(text: str) -> tuple[float, ...]:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -204,7 +203,9 @@ def stitch(
         "config": config.to_dict(),
     }
     if as_json:
-        out.print_json(json.dumps(summary))
+        from scrapcut_cli.commands._console import json_document
+
+        out.print_json(json_document("scrapcut.stitch/v1", summary))
         return
     _render(result, plan.skipped, output, surface_path)
     err.print(f"wrote {output}" + ("" if surface_path is None else f" and {surface_path}"))
