@@ -293,6 +293,11 @@ def test_a_finished_batch_does_no_work(
     rerun = CliRunner().invoke(cli, [*args, "-o", str(out)])
     assert rerun.exit_code == 0, rerun.output
     assert "4 run(s): 0 run now, 4 finished before, 0 failed" in rerun.stdout
+    printed = CliRunner().invoke(cli, [*args, "-o", str(out), "--json"])
+    assert printed.exit_code == 0, printed.output
+    data = json.loads(printed.stdout)
+    assert data["schema"] == "scrapcut.batch/v1" and data["tool_version"]
+    assert (data["ran"], data["cached"], len(data["rows"])) == (0, 4, 4)
     (tmp_path / "notes").mkdir()
     (tmp_path / "notes" / "thesis.tex").write_text("keep")
     refused = CliRunner().invoke(cli, [*args, "-o", str(tmp_path / "notes")])

@@ -49,6 +49,12 @@ def _names(values: tuple[str, ...]) -> list[str]:
 @engine_options
 @click.option("--no-plots", is_flag=True, help="Skip the PNG figures.")
 @click.option(
+    "--json",
+    "as_json",
+    is_flag=True,
+    help="Print the runs as JSON (scrapcut.batch/v1: counts and one row per run).",
+)
+@click.option(
     "-o",
     "--output",
     "out_dir",
@@ -69,6 +75,7 @@ def batch(
     scheduler: str | None,
     no_plots: bool,
     out_dir: Path,
+    as_json: bool,
     config_path: Path | None,
     **shared: Any,
 ) -> None:
@@ -122,6 +129,20 @@ def batch(
             )
     if result.failed:
         err.print(f"[yellow]{result.failed} run(s) failed or were lost; see {out_dir}/report.md")
+    if as_json:
+        from scrapcut_cli.commands._console import json_document
+
+        summary = {
+            "out_dir": str(out_dir),
+            "ran": result.ran,
+            "cached": result.cached,
+            "lost": result.lost,
+            "failed": result.failed,
+            "wall_time_s": result.wall_time_s,
+            "rows": result.rows,
+        }
+        click.echo(json_document("scrapcut.batch/v1", summary))
+        return
     out.print(
         f"{len(result.rows)} run(s): {result.ran} run now, {result.cached} finished before, "
         f"{result.failed} failed; wrote {out_dir}/batch.parquet, batch.csv, report.md in "
