@@ -1094,6 +1094,35 @@ class ScrapcutConfig:
         return replace(self, **{section: update_dataclass(current, given, section)})
 
 
+#: Keys a user may write in another unit than the one saved: ``voxel_size_mm = 2`` for
+#: ``voxel_size_m = 0.002``. (suffix typed, suffix of the field, factor to the field's unit).
+UNIT_ALIASES = (("_mm", "_m", 1e-3), ("_ms", "_s", 1e-3), ("_deg", "_rad", math.pi / 180.0))
+
+
+def unit_aliases(obj: Any, values: dict[str, Any], where: str) -> dict[str, Any]:
+    """``values`` with keys in a user's unit converted to the field's (the one place it is
+    done): a TOML file may say ``voxel_size_mm = 2`` where the saved form is
+    ``voxel_size_m = 0.002``. A key that is itself a field is left alone; both forms of one
+    parameter are refused (which one wins would be a guess)."""
+    known = {f.name for f in fields(obj)}
+    out: dict[str, Any] = {}
+    for key, value in values.items():
+        target, factor = key, None
+        for typed, saved, scale in UNIT_ALIASES:
+            stem = key.removesuffix(typed)
+            if key not in known and key.endswith(typed) and stem + saved in known:
+                target, factor = stem + saved, scale
+                break
+        if factor is not None:
+            if target in values:
+                raise ConfigError(f"{where}: {key} and {target} name one parameter; keep one")
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise ConfigError(f"{where}: {key} must be a number, got {value!r}")
+            value = value * factor
+        out[target] = value
+    return out
+
+
 def update_dataclass(obj: T, values: dict[str, Any], where: str) -> T:
     """``dataclasses.replace`` with a clear error for unknown names, wrong types and values
     outside their ranges (the section is validated as a whole afterwards)."""
@@ -1173,7 +1202,8 @@ def config_from_dict(data: dict[str, Any], *, where: str = "config") -> Scrapcut
         if not isinstance(values, dict):
             raise ConfigError(f"{where}: [{section}] must be a table")
         current = getattr(config, section)
-        config = replace(config, **{section: update_dataclass(current, dict(values), section)})
+        values = unit_aliases(current, dict(values), f"{where}: [{section}]")
+        config = replace(config, **{section: update_dataclass(current, values, section)})
     return validate(config)
 
 

@@ -92,3 +92,22 @@ def test_every_stage_option_reaches_its_config_field_in_si_units() -> None:
         config = apply_stage_options(base, {name: value})
         assert getattr(getattr(config, stage), field_name) == expected, flag
         assert apply_stage_options(base, {name: None}) == base
+
+
+def test_toml_keys_in_millimetres_and_milliseconds_are_converted(tmp_path: Path) -> None:
+    """The saved form is SI (`voxel_size_m`); a user may write the unit they type in options."""
+    path = tmp_path / "mm.toml"
+    path.write_text(
+        "[perception]\nvoxel_size_mm = 3\n[recording]\nsync_tolerance_ms = 15\n"
+        "[toolpath]\nstandoff_m = 0.01\n"
+    )
+    config = load_config(path)
+    assert config.perception.voxel_size_m == pytest.approx(0.003, abs=1e-15)
+    assert config.recording.sync_tolerance_s == pytest.approx(0.015, abs=1e-15)
+    assert config.toolpath.standoff_m == 0.01
+    assert config.toolpath.thickness_mm == ScrapcutConfig().toolpath.thickness_mm  # a field
+    both = {"perception": {"voxel_size_mm": 3, "voxel_size_m": 0.003}}
+    with pytest.raises(ConfigError, match="voxel_size_mm and voxel_size_m name one parameter"):
+        config_from_dict(both)
+    with pytest.raises(ConfigError, match="voxel_size_m"):  # the range still holds: 1 m voxels
+        config_from_dict({"perception": {"voxel_size_mm": 1000}})
