@@ -60,7 +60,7 @@ def test_mcap_output_holds_one_base_frame_cloud_per_frame(
 ) -> None:
     path, frames = scene
     target = tmp_path / "paint.mcap"
-    code, out, err = run("filter", str(path), "-o", str(target), "--surface", "--json")
+    code, out, err = run("filter", str(path), "-o", str(target), "--with-surface", "--json")
     assert code == 0, err
     summary = json.loads(out)
     assert summary["schema"] == "scrapcut.filter/v1" and summary["tool_version"]

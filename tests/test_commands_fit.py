@@ -363,9 +363,9 @@ def test_fit_every_simulated_piece(
     if name == "basket" and method == "skeleton":
         # The paper's basket: paint only on the wires, the 5 mm skeleton falls apart.
         line = _one_line_error(result)
-        assert "skeleton broken into" in line and "at leaf size 5 mm; try --leaf-size" in line
+        assert "skeleton broken into" in line and "at leaf size 5 mm; try --leaf-size-mm" in line
         assert not out.exists()
-        result = _run("fit", rec, "--method", method, "--leaf-size", "20", "-o", out)
+        result = _run("fit", rec, "--method", method, "--leaf-size-mm", "20", "-o", out)
     assert result.exit_code == 0, result.output
     mean, _ = _check_path_file(out, rec)
     # No open line is ever closed (issue 15).

@@ -48,6 +48,7 @@ def test_the_fixtures_trajectory_reaches_every_setpoint_as_franka_dh_says(
     data = json.loads(traj_file.read_text())
     assert data["schema"] == "scrapcut.trajectory/v1" and data["robot"] == "panda"
     assert data["base_frame"] == "panda_link0" and len(data["joint_names"]) == 7
+    assert summary["schema"] == "scrapcut.trajectory_summary/v1" and summary["tool_version"]
     assert summary["executable"] and summary["reached"] == len(path)
     assert summary["observed_surface"].startswith("recording depth")
     assert summary["observed_points"] > 1000 and summary["trajectory_collisions"] == 0

@@ -91,7 +91,7 @@ def test_no_docstring_points_at_a_missing_file() -> None:
     text = {p: p.read_text(encoding="utf-8") for p in sources}
     assert not [p.name for p, t in text.items() if "DESIGN.md" in t]
     for p, t in text.items():
-        for doc in set(re.findall(r"docs/[\w.-]+\.\w+", t)):
+        for doc in set(re.findall(r"(?<![\w/.])docs/[\w.-]+\.\w+", t)):
             assert (ROOT / doc).is_file(), f"{p.relative_to(ROOT)} points at {doc}"
     assert (DOCS / "torch_frame.png").stat().st_size > 10_000
 
@@ -116,3 +116,35 @@ def test_import_open3d_finds_libusb_for_a_python_user() -> None:
     )
     assert result.returncode == 0, result.stderr[-2000:]
     assert result.stdout.split() == ["False", "True"]
+
+
+def test_one_help_style_and_old_spellings_warn(tmp_path: Path) -> None:
+    """Defaults are stated in the help text as "(default X)" (no click show_default); a length
+    option carries its unit; the old spellings still work, with one warning line."""
+    from click.testing import CliRunner
+
+    ctx = click.Context(cli)
+    for name in cli.list_commands(ctx):
+        command = cli.get_command(ctx, name)
+        assert command is not None
+        for p in command.params:
+            if not isinstance(p, click.Option) or p.hidden or p.required or p.is_flag:
+                continue
+            where = f"scrapcut {name} {p.opts[-1]}"
+            assert not p.show_default, where
+            if p.default not in (None, ()) and p.name != "help":
+                assert "default" in (p.help or ""), where
+    missing = tmp_path / "missing.mcap"
+    runner = CliRunner()
+    for args, old, new in (
+        (["fit", missing, "-o", tmp_path / "p.json", "--leaf-size", "20"], "--leaf-size", "-mm"),
+        (["filter", missing, "--surface"], "--surface", "--with-surface"),
+    ):
+        result = runner.invoke(cli, [str(a) for a in args])
+        assert result.exit_code == 1  # the recording is missing: the warning came first
+        warning, error = result.stderr.strip().splitlines()
+        assert warning.startswith(f"warning: {old} is deprecated; use ") and new in warning
+        assert error.startswith("scrapcut: error: ")
+    both = runner.invoke(cli, ["fit", str(missing), "-o", "p.json", "--leaf-size", "5",
+                               "--leaf-size-mm", "5"])  # fmt: skip
+    assert both.exit_code == 2 and "give one" in both.output

@@ -97,7 +97,8 @@ def test_finer_leaf_on_a_straight_band():
 def test_basket_breaks_at_5_mm_and_holds_at_20_mm():
     pts, line = basket_stroke()
     with pytest.raises(
-        FittingError, match=r"^skeleton broken into 15 pieces at leaf size 5 mm; try --leaf-size$"
+        FittingError,
+        match=r"^skeleton broken into 15 pieces at leaf size 5 mm; try --leaf-size-mm$",
     ):
         fit_skeleton(pts, config=SkeletonConfig(leaf_size_m=0.005))
     curve = fit_skeleton(pts, config=SkeletonConfig(leaf_size_m=0.02))

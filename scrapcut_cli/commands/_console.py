@@ -50,6 +50,11 @@ def print_table(table: object) -> None:
         Console(width=natural.maximum, highlight=False, soft_wrap=True).print(table)
 
 
+def deprecated(old: str, new: str) -> None:
+    """One warning line for an option's old spelling (it still works)."""
+    err.print(f"warning: {old} is deprecated; use {new} (same meaning)", markup=False)
+
+
 def json_document(schema: str, data: Mapping[str, Any]) -> str:
     """A command's ``--json`` output: ``schema`` (``data``'s own if it has one), then
     ``tool_version``, then ``data``; non-finite floats become null (strict JSON)."""

@@ -29,8 +29,7 @@ from scrapcut_cli.commands._console import err
     "--storage",
     type=click.Choice(["mcap", "sqlite3"]),
     default="mcap",
-    show_default=True,
-    help="Storage plugin of a ROS 2 bag.",
+    help="Storage plugin of a ROS 2 bag (default mcap).",
 )
 @click.option(
     "--compress",

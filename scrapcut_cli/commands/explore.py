@@ -85,15 +85,14 @@ DIVERGED = 3
     "--match-distance-mm",
     type=bounded(0.1, 2000.0, "a recorded view over 2 m from the planned one shows other things"),
     default=100.0,
-    show_default=True,
-    help="What-if: a recorded frame answers a planned view within this camera distance [mm].",
+    help="What-if: a recorded frame answers a planned view within this camera distance [mm] "
+    "(default 100).",
 )
 @click.option(
     "--match-angle-deg",
     type=bounded(0.1, 180.0, "an angle between optical axes"),
     default=30.0,
-    show_default=True,
-    help="What-if: ...and within this angle between the optical axes [deg].",
+    help="What-if: ...and within this angle between the optical axes [deg] (default 30).",
 )
 @click.option(
     "--start-frame",

@@ -143,10 +143,17 @@ def _sink(
     "only the summary is printed.",
 )
 @click.option(
-    "--surface",
+    "--with-surface",
     "with_surface",
     is_flag=True,
     help="Also write each frame's surface band (/scrapcut/surface, or surface_*.ply).",
+)
+@click.option(
+    "--surface",
+    "old_surface",
+    is_flag=True,
+    hidden=True,
+    help="Deprecated spelling of --with-surface (`--surface FILE` names a file elsewhere).",
 )
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @calibration_option
@@ -158,6 +165,7 @@ def filter_cmd(
     recording: Path,
     output: Path | None,
     with_surface: bool,
+    old_surface: bool,
     as_json: bool,
     calibration_path: Path | None,
     config_path: Path | None,
@@ -170,7 +178,11 @@ def filter_cmd(
     counted, not fatal; a recording without any paint is an error that names the colours seen.
     """
     from scrapcut_cli.calibration.recipe import camera_mount_for
-    from scrapcut_cli.commands._console import err, out, progress
+    from scrapcut_cli.commands._console import deprecated, err, out, progress
+
+    if old_surface:
+        deprecated("--surface", "--with-surface")
+        with_surface = True
     from scrapcut_cli.perception.cloud import PerceptionTally, process_frame
     from scrapcut_cli.perception.paint import PAINT_PRESETS, resolve_recording_paint
     from scrapcut_cli.recording.reader import open_recording

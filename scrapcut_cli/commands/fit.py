@@ -35,8 +35,7 @@ METHODS = choice_names(FitMethod)
     "--method",
     type=click.Choice(METHODS),
     default="nurbs",
-    show_default=True,
-    help="Curve fit: open NURBS or 3-D skeleton.",
+    help="Curve fit: open NURBS or 3-D skeleton (default nurbs).",
 )
 @click.option(
     "-o",
@@ -84,11 +83,19 @@ METHODS = choice_names(FitMethod)
     help="Do not measure the path against a reference (no PATH.error.json).",
 )
 @click.option(
-    "--leaf-size",
+    "--leaf-size-mm",
     "leaf_size_mm",
     type=config_type("skeleton.leaf_size_m", 1e-3),
     default=None,
     help="Skeleton voxel (leaf) size [mm] (default 5, the paper's).",
+)
+@click.option(
+    "--leaf-size",
+    "old_leaf_size_mm",
+    type=config_type("skeleton.leaf_size_m", 1e-3),
+    default=None,
+    hidden=True,
+    help="Deprecated spelling of --leaf-size-mm.",
 )
 @click.option(
     "--smoothness",
@@ -209,6 +216,7 @@ def fit(
     reference: Path | None,
     no_eval: bool,
     leaf_size_mm: float | None,
+    old_leaf_size_mm: float | None,
     smoothness: float | None,
     control_points: int | None,
     degree: int | None,
@@ -246,7 +254,7 @@ def fit(
     path is measured against it as `scrapcut eval` does, and PATH.error.json and PATH.error.md
     are written beside the path file.
     """
-    from scrapcut_cli.commands._console import err, progress
+    from scrapcut_cli.commands._console import deprecated, err, progress
     from scrapcut_cli.pipeline.evaluate import error_report_paths
     from scrapcut_cli.pipeline.job import Job, Pipeline
 
@@ -275,6 +283,11 @@ def fit(
             "(--csv, --tum and --mcap write their files beside it)"
         )
 
+    if old_leaf_size_mm is not None:
+        if leaf_size_mm is not None:
+            raise click.UsageError("--leaf-size is the old spelling of --leaf-size-mm; give one")
+        deprecated("--leaf-size", "--leaf-size-mm")
+        leaf_size_mm = old_leaf_size_mm
     stage, shared = split_stage_options(shared)
     config = apply_stage_options(build_config(config_path, **shared), stage)
     config = config.override("skeleton", leaf_size_m=mm_to_m(leaf_size_mm))

@@ -85,16 +85,15 @@ def _names(values: tuple[str, ...]) -> list[str]:
     "--retry-leaf-mm",
     type=config_type("skeleton.leaf_size_m", 1e-3),
     default=20.0,
-    show_default=True,
-    help="Leaf size [mm] of the one retry when the skeleton breaks (the paper's basket).",
+    help="Leaf size [mm] of the one retry when the skeleton breaks (the paper's basket; "
+    "default 20).",
 )
 @click.option(
     "--leaf-sweep-mm",
     default=DEFAULT_LEAF_SWEEP,
-    show_default=True,
     metavar="LIST",
     help="Skeleton leaf sizes [mm] also fitted on each stitched cloud for the paper's Fig. 3 "
-    "(comma-separated; 'none' to skip).",
+    f"(comma-separated; 'none' to skip; default {DEFAULT_LEAF_SWEEP}).",
 )
 @click.option("--no-plots", is_flag=True, help="Skip the PNG figures.")
 @click.option(
@@ -118,10 +117,9 @@ def _names(values: tuple[str, ...]) -> list[str]:
 @click.option(
     "--readme-section",
     default="table1",
-    show_default=True,
     metavar="NAME",
     help="Which marked section --readme rewrites: the lines between "
-    "'<!-- scrapcut:NAME begin ... -->' and '<!-- scrapcut:NAME end -->'.",
+    "'<!-- scrapcut:NAME begin ... -->' and '<!-- scrapcut:NAME end -->' (default table1).",
 )
 @click.option(
     "-o",

@@ -37,22 +37,19 @@ from scrapcut_cli.commands._options import (
     "--time-step-ms",
     type=bounded(0.1, 20.0, "pybullet is unstable beyond 20 ms; 0.1 ms is ten times Franka's rate"),
     default=1.0,
-    show_default=True,
-    help="Simulation and control step [ms] (Franka's controller runs at 1 ms).",
+    help="Simulation and control step [ms] (default 1: Franka's controller runs at 1 ms).",
 )
 @click.option(
     "--check-period-ms",
     type=bounded(1.0, 10_000.0, "one check per control period at most; 10 s misses a pass"),
     default=50.0,
-    show_default=True,
-    help="Collision checks along the simulated motion, every [ms].",
+    help="Collision checks along the simulated motion, every [ms] (default 50).",
 )
 @click.option(
     "--floor-z-mm",
     type=config_type("motion.floor_z_m", 1e-3),
     default=0.0,
-    show_default=True,
-    help="Height of the floor in the base frame [mm].",
+    help="Height of the floor in the base frame [mm] (default 0).",
 )
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON.")
 @config_option
@@ -96,7 +93,9 @@ def simulate_cut(
         write_text_atomic(output, json.dumps(report, indent=1, allow_nan=False) + "\n")
         report["outputs"] = [str(output)]
     if as_json:
-        click.echo(json.dumps(report, indent=2))
+        from scrapcut_cli.commands._console import json_document
+
+        click.echo(json_document("scrapcut.simulate_cut/v1", report))
     else:
         _render(report, traj_file)
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -158,7 +157,9 @@ def trajectory(
     summary["outputs"] = [str(p) for p in written]
     summary["time_s"] = result.timings_s
     if as_json:
-        click.echo(json.dumps(summary, indent=2))
+        from scrapcut_cli.commands._console import json_document
+
+        click.echo(json_document("scrapcut.trajectory_summary/v1", summary))
     else:
         _render(summary, path_file)
     if summary["observed_surface"] == "none":

@@ -134,7 +134,7 @@ def fit_skeleton(
     ------
     FittingError
         Too few or non-finite points, bad options, or the skeleton broken into pieces
-        ("skeleton broken into K pieces at leaf size X mm; try --leaf-size").
+        ("skeleton broken into K pieces at leaf size X mm; try --leaf-size-mm").
     """
     config = config if config is not None else SkeletonConfig()
     _check_config(config)
@@ -164,7 +164,8 @@ def fit_skeleton(
     if len(significant) != 1:
         pieces = len(significant) if len(significant) else n_pieces
         raise FittingError(
-            f"skeleton broken into {pieces} pieces at leaf size {leaf * 1e3:g} mm; try --leaf-size"
+            f"skeleton broken into {pieces} pieces at leaf size {leaf * 1e3:g} mm; "
+            "try --leaf-size-mm"
         )
     piece = int(significant[0])
     inside = point_piece == piece

@@ -1,6 +1,6 @@
 """The trajectory file (``scrapcut.trajectory/v1`` JSON) and its CSV and MCAP exports.
 
-Fixed keys (DESIGN.md; add keys freely, never rename these): ``schema``, ``robot``,
+Fixed keys (docs/design.md; add keys freely, never rename these): ``schema``, ``robot``,
 ``base_frame``, ``joint_names`` (7), ``T_flange_tool`` {``translation_m``,
 ``rotation_xyzw``}, ``points`` [{``t_s``, ``positions`` [7 rad], ``setpoint`` (index into
 the path's set-points, or null)}] and ``summary``. Each point also carries ``velocities``,
