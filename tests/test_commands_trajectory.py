@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner, Result
 from helpers import one_line_error, panda_dh_flange
+from test_docs import check_schema
 
 from scrapcut_cli.cli import cli
 from scrapcut_cli.geometry import quat_xyzw_to_matrix
@@ -46,6 +47,7 @@ def test_the_fixtures_trajectory_reaches_every_setpoint_as_franka_dh_says(
     path_file, traj_file, summary = planned
     _, path, _ = read_path_file(path_file)
     data = json.loads(traj_file.read_text())
+    check_schema(data, "trajectory.schema.json")  # docs/ describes what is written
     assert data["schema"] == "scrapcut.trajectory/v1" and data["robot"] == "panda"
     assert data["base_frame"] == "panda_link0" and len(data["joint_names"]) == 7
     assert summary["schema"] == "scrapcut.trajectory_summary/v1" and summary["tool_version"]

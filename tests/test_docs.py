@@ -23,10 +23,17 @@ def path_schema() -> dict[str, object]:
     return dict(json.loads((DOCS / "path.schema.json").read_text(encoding="utf-8")))
 
 
+def check_schema(data: object, name: str) -> None:
+    """Validate ``data`` against the JSON Schema docs/``name`` (raises on a mismatch)."""
+    jsonschema = pytest.importorskip("jsonschema")
+    schema = json.loads((DOCS / name).read_text(encoding="utf-8"))
+    jsonschema.Draft202012Validator.check_schema(schema)
+    jsonschema.Draft202012Validator(schema).validate(data)
+
+
 def check_path_file(data: object) -> None:
     """Validate a path file against docs/path.schema.json (raises on a mismatch)."""
-    jsonschema = pytest.importorskip("jsonschema")
-    jsonschema.Draft202012Validator(path_schema()).validate(data)
+    check_schema(data, "path.schema.json")
 
 
 def test_the_path_schema_is_a_schema_and_rejects_what_the_reader_rejects() -> None:
