@@ -76,6 +76,10 @@ def choice_names(choices: type[enum.StrEnum]) -> tuple[str, ...]:
     return tuple(member.value for member in choices)
 
 
+#: An open end of ``--frames A:`` / ``--time A:`` (a billion frames or seconds: the end).
+CROP_END = 1e9
+
+
 @dataclass(frozen=True)
 class RecordingConfig:
     """Which topics to read and how to pair and pose frames."""
@@ -93,6 +97,23 @@ class RecordingConfig:
         "s",
         "a colour and a depth image over 1 s apart do not show one scene from a moving wrist "
         "(cameras stream at 6-90 Hz)",
+    )
+    # crop a long recording: usable frames [first, end) and seconds [from, to) since its start
+    frames: tuple[float, float] | None = field(
+        default=None,
+        metadata={
+            RANGE: ((0.0, CROP_END), (0.0, CROP_END)),
+            UNIT: "frame, frame",
+            WHY: "frame numbers count the usable frames from 0; the end is not included",
+        },
+    )
+    time_s: tuple[float, float] | None = field(
+        default=None,
+        metadata={
+            RANGE: ((0.0, CROP_END), (0.0, CROP_END)),
+            UNIT: "s, s",
+            WHY: "seconds since the recording's first message; the end is not included",
+        },
     )
 
 

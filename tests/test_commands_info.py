@@ -200,3 +200,27 @@ def test_a_good_tiny_recording_works(tmp_path: Path) -> None:
     assert data["frames"]["usable"] == 1
     assert data["base_frame"] == "base"
     assert data["has_reference"] is False
+
+
+def test_frames_and_time_crop_a_recording(recording: Path) -> None:
+    """--frames A:B / --time A:B (every command that reads recordings has them) keep part of
+    the usable frames; the rest are counted as outside_crop."""
+    from scrapcut_cli.recording.reader import open_recording
+
+    with open_recording(recording) as rec:
+        stamps = rec.plan().stamps_ns
+        start = rec.start_ns
+    data = json.loads(_run(str(recording), "--frames", "1:3", "--json").stdout)
+    assert data["frames"]["usable"] == 2 and data["frames"]["skip_reasons"]["outside_crop"] == 2
+    # From just before the second usable frame to the end.
+    t = (int(stamps[1]) - start) / 1e9 - 1e-6
+    data = json.loads(_run(str(recording), "--time", f"{t}:", "--json").stdout)
+    assert data["frames"]["usable"] == 3 and data["frames"]["skip_reasons"]["outside_crop"] == 1
+    empty = _run(str(recording), "--frames", "7:9")
+    assert empty.exit_code == 1
+    assert "keep no frame: the recording has 4 usable frames (0:4)" in empty.stderr
+    for bad in ("3:1", "x:2", "5", "1.5:3"):
+        result = _run(str(recording), "--frames", bad)
+        assert result.exit_code == 2 and "--frames" in result.output, bad
+    replay = CliRunner().invoke(cli, ["explore", str(recording), "--frames", "0:2"])
+    assert replay.exit_code == 2 and "a replay repeats its whole log" in replay.output

@@ -8,6 +8,7 @@ any other numeric option names its own finite range (:func:`bounded`). Non-finit
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
@@ -109,6 +110,31 @@ def config_option(f: F) -> F:
     )(f)
 
 
+def _crop_range(
+    ctx: click.Context, param: click.Parameter, text: str | None
+) -> tuple[float, float] | None:
+    """``A:B`` → (A, B) with open ends as 0 and :data:`CROP_END`; B must exceed A."""
+    from scrapcut_cli.config import CROP_END
+
+    if text is None:
+        return None
+    name = param.opts[0] if param.opts else "--frames"
+    first, sep, last = text.partition(":")
+    try:
+        lo = float(first) if first.strip() else 0.0
+        hi = float(last) if last.strip() else CROP_END
+    except ValueError:
+        lo = hi = math.nan
+    if not sep or not (0.0 <= lo < hi <= CROP_END):
+        raise click.BadParameter(
+            f"expected A:B with 0 <= A < B (either may be left out), got {text!r}",
+            param_hint=name,
+        )
+    if name == "--frames" and not (lo.is_integer() and (hi == CROP_END or hi.is_integer())):
+        raise click.BadParameter(f"frame numbers are whole, got {text!r}", param_hint=name)
+    return lo, hi
+
+
 def recording_options(f: F) -> F:
     """Topic, frame and pairing options for commands that read a recording."""
     options = [
@@ -131,6 +157,23 @@ def recording_options(f: F) -> F:
             is_flag=True,
             default=None,
             help="Read a damaged or truncated MCAP up to the damage (as `mcap recover`).",
+        ),
+        click.option(
+            "--frames",
+            "frames",
+            default=None,
+            metavar="A:B",
+            callback=_crop_range,
+            help="Use only usable frames A to B-1 (counted from 0, as info lists them; A: or :B "
+            "leave an end open; default all).",
+        ),
+        click.option(
+            "--time",
+            "time_s",
+            default=None,
+            metavar="A:B",
+            callback=_crop_range,
+            help="Use only frames from A to B seconds after the recording's start (default all).",
         ),
     ]
     for option in reversed(options):
@@ -189,6 +232,8 @@ def build_config(
     base_frame: str | None = None,
     sync_tolerance_ms: float | None = None,
     salvage: bool | None = None,
+    frames: tuple[float, float] | None = None,
+    time_s: tuple[float, float] | None = None,
     paint: str | None = None,
     hsv: str | None = None,
 ) -> ScrapcutConfig:
@@ -202,6 +247,8 @@ def build_config(
         base_frame=base_frame,
         sync_tolerance_s=None if sync_tolerance_ms is None else sync_tolerance_ms / 1000.0,
         salvage=salvage or None,
+        frames=frames,
+        time_s=time_s,
     )
     parsed = parse_hsv(hsv)
     if parsed is not None:

@@ -183,6 +183,10 @@ def explore(
         )
     if no_eval and reference is not None:
         raise click.UsageError("--reference and --no-eval contradict each other")
+    if not what_if_mode and (shared.get("frames") or shared.get("time_s")):
+        raise click.UsageError(
+            "--frames/--time crop what --what-if runs over; a replay repeats its whole log"
+        )
     if output is not None and real_path(output) == real_path(recording):
         raise click.UsageError(f"{output} would overwrite the recording; choose another -o")
     config = apply_calibration_options(build_config(config_path, **shared), calibration_path)

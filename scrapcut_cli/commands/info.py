@@ -28,6 +28,8 @@ def info(
     base_frame: str | None,
     sync_tolerance_ms: float | None,
     salvage: bool | None,
+    frames: tuple[float, float] | None,
+    time_s: tuple[float, float] | None,
     config_path: Path | None,
 ) -> None:
     """Describe RECORDING (an .mcap file, a ROS 1 .bag or a ROS 2 bag directory).
@@ -47,6 +49,8 @@ def info(
         base_frame=base_frame,
         sync_tolerance_ms=sync_tolerance_ms,
         salvage=salvage,
+        frames=frames,
+        time_s=time_s,
     )
     summary = summarize_recording(recording, config.recording)
     if as_json:

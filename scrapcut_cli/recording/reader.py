@@ -89,7 +89,8 @@ class FramePlan:
     skip_reasons : dict[str, int]
         ``no_depth`` (no depth image within the sync tolerance), ``duplicate_stamp`` (an
         earlier colour image has the same stamp), ``pose_out_of_range`` (the stamp lies
-        outside the sampled TF time range); only reasons that occur.
+        outside the sampled TF time range), ``outside_crop`` (left out by ``--frames`` /
+        ``--time``); only reasons that occur.
     unpaired_depth : int
         Depth images no colour image was paired with.
     stamps_ns : (usable,) int64
@@ -699,10 +700,15 @@ class Recording:
         usable_color = np.flatnonzero(fresh)[in_range]
         if self.tf.is_static(base, camera_frame) and len(usable_color) > 1:
             self._refuse_static_chain_if_images_move(base, camera_frame, usable_color)
+        T = T[in_range]
+        keep = self._crop(c[usable_color])
+        outside = int(np.count_nonzero(~keep))
+        usable_color, T = usable_color[keep], T[keep]
         reasons = {
             "no_depth": int(np.count_nonzero(~paired)),
             "duplicate_stamp": int(np.count_nonzero(paired & repeated)),
             "pose_out_of_range": int(np.count_nonzero(~in_range)),
+            "outside_crop": outside,
         }
         used_depth = depth_index[usable_color]
         return FramePlan(
@@ -712,10 +718,30 @@ class Recording:
             unpaired_depth=len(d) - len(np.unique(depth_index[paired])),
             stamps_ns=c[usable_color],
             depth_stamps_ns=d[used_depth],
-            T_base_cam=T[in_range],
+            T_base_cam=T,
             color_index=usable_color.astype(np.int64),
             depth_index=used_depth.astype(np.int64),
         )
+
+    def _crop(self, stamps_ns: NDArray[np.int64]) -> NDArray[np.bool_]:
+        """Which usable frames (their colour stamps, in order) ``--frames A:B`` and
+        ``--time A:B`` keep; a crop that keeps none is an error naming what there is."""
+        keep = np.ones(len(stamps_ns), dtype=bool)
+        frames, times = self.config.frames, self.config.time_s
+        if frames is not None:
+            index = np.arange(len(stamps_ns))
+            keep &= (index >= frames[0]) & (index < frames[1])
+        if times is not None:
+            t = (stamps_ns - self.start_ns) / 1e9
+            keep &= (t >= times[0]) & (t < times[1])
+        if len(stamps_ns) and not keep.any():
+            t0 = (int(stamps_ns[0]) - self.start_ns) / 1e9
+            t1 = (int(stamps_ns[-1]) - self.start_ns) / 1e9
+            raise RecordingError(
+                f"--frames/--time keep no frame: the recording has {len(stamps_ns)} usable "
+                f"frames (0:{len(stamps_ns)}) between {t0:.2f} and {t1:.2f} s"
+            )
+        return keep
 
     def _refuse_static_chain_if_images_move(
         self, base: str, camera_frame: str, color_index: NDArray[np.int64]
