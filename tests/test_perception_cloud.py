@@ -39,9 +39,10 @@ from scrapcut_cli.perception.cloud import (
     process_frame,
     reject_isolated_pixels,
     reject_small_blobs,
+    split_wide_blobs,
     usable_depth_pixels,
 )
-from scrapcut_cli.perception.paint import PAINT_PRESETS
+from scrapcut_cli.perception.paint import PAINT_PRESETS, paint_mask, paint_pixel_indices
 from scrapcut_cli.recording.frame import CameraModel, Frame
 
 ORANGE = PAINT_PRESETS["orange"].hsv
@@ -206,9 +207,11 @@ def test_exact_frame_paint_lies_on_the_stroke_and_the_surface(
 def test_noisy_frame_rust_flying_pixels_and_holes_do_not_reach_the_cloud(
     noisy_frame: Frame, reference: np.ndarray
 ) -> None:
-    raw, _, _ = backproject_paint(
-        noisy_frame, ORANGE, replace(CONFIG, min_paint_neighbors=0, min_paint_area_m2=0.0)
+    filtered = paint_pixel_indices(noisy_frame.color, ORANGE)
+    usable = usable_depth_pixels(
+        noisy_frame.depth, filtered, min_depth_m=0.1, max_depth_m=2.0, flying_pixel_ratio=0.03
     )
+    raw = backproject_pixels(noisy_frame.camera, noisy_frame.depth, usable, noisy_frame.T_base_cam)
     d_raw = PolylineDistance(reference).distance(raw)
     assert np.mean(d_raw > HALF_WIDTH + 0.005) > 0.001  # rust does leak into the raw filter
     clouds = process_frame(noisy_frame, ORANGE, CONFIG)
@@ -359,3 +362,41 @@ def test_scattered_specks_are_told_apart_from_paint_without_depth(exact_frame: F
     everything = replace(CONFIG, min_paint_neighbors=0, min_paint_area_m2=0.0, sor_neighbors=0)
     kept = process_frame(specks, ORANGE, everything)
     assert kept.skip_reason is None and len(kept.paint_base) > 100
+
+
+def test_a_duller_cluster_and_wide_blobs_are_kept_apart_from_the_paint() -> None:
+    """Rust at iron-oxide saturation passes the orange range: the frame's saturation clusters
+    set it apart (other_base), and so does a crate face wider than any stroke."""
+    camera = small_camera()
+    reference = cylinder_top_line()
+    frame = render_cylinder(camera, top_view(0.0), reference, rust=False)
+    color = np.array(frame.color)
+    rng = np.random.default_rng(3)
+    paint = paint_mask(color, PAINT_PRESETS["orange"].hsv)
+    # Rust patches beside the stroke: orange-brown at S ~0.72, inside the orange range.
+    v, u = np.mgrid[0 : camera.height, 0 : camera.width]
+    patch = ((u - 40) ** 2 + (v - 30) ** 2 < 15**2) & ~paint
+    color[patch] = np.clip(np.array([150, 80, 42]) + rng.normal(0, 2, (patch.sum(), 3)), 0, 255)
+    assert paint_mask(color, PAINT_PRESETS["orange"].hsv)[patch].mean() > 0.9
+    rusty = Frame(frame.index, frame.stamp_ns, color, frame.depth, camera, frame.T_base_cam)
+    config = PerceptionConfig(min_paint_points=5, sor_neighbors=0)
+    clouds = process_frame(rusty, PAINT_PRESETS["orange"].hsv, config)
+    assert len(clouds.other_base) > 0
+    line = PolylineDistance(reference)
+    assert line.distance(clouds.paint_base).max() < 0.0125 + 0.003  # no rust in the paint
+    assert line.distance(clouds.other_base).min() > 0.012
+    assert clouds.paint_rgb.shape == (len(clouds.paint_base), 3)
+    # A plain stroke is one cluster: nothing apart.
+    plain = process_frame(frame, PAINT_PRESETS["orange"].hsv, config)
+    assert len(plain.other_base) == 0
+    # A blob 10 cm wide is no stroke at 80 mm; at 0 (off) it is paint.
+    mask = (u > 60) & (u < 150) & (v > 60)
+    pixels = np.flatnonzero(mask.ravel())
+    depth = np.full((camera.height, camera.width), 0.3, dtype=np.float32)  # 2.0 mm/px here
+    kept, wide = split_wide_blobs(pixels, depth, camera, max_width_m=0.08)
+    assert len(kept) == 0 and np.array_equal(wide, pixels)
+    kept, wide = split_wide_blobs(pixels, depth, camera, max_width_m=0.0)
+    assert np.array_equal(kept, pixels) and len(wide) == 0
+    band = np.flatnonzero(((np.abs(v - 60) < 6) & (u > 10)).ravel())  # 11 px: 22 mm wide
+    kept, wide = split_wide_blobs(band, depth, camera, max_width_m=0.08)
+    assert np.array_equal(kept, band) and len(wide) == 0

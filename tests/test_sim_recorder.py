@@ -27,7 +27,7 @@ from scrapcut_cli.geometry import (
     rotation_angle,
     transform_points,
 )
-from scrapcut_cli.perception.paint import PAINT_PRESETS, paint_mask
+from scrapcut_cli.perception.paint import HsvRange, paint_mask, rgb_to_hsv_deg
 from scrapcut_cli.recording.frame import Frame
 from scrapcut_cli.recording.mount import CameraMount
 from scrapcut_cli.recording.reader import open_recording
@@ -194,18 +194,23 @@ def test_reader_returns_exactly_what_the_planner_saw(
 
 
 def paint_distances(path: Path, mount: CameraMount | None = None) -> tuple[np.ndarray, float]:
-    """Distances (m) of back-projected orange pixels to the reference; the stroke's max half.
+    """Distances (m) of back-projected pixels of the can's colour to the reference; the
+    stroke's max half width.
 
-    ``mount``: pose the frames with this camera mount and clock offset (default: as recorded).
+    The can's own colour (hue ±12°, at least 85 % of its saturation), not the orange preset's
+    range: that takes rust too, which is perception's problem, not the recorder's. ``mount``:
+    pose the frames with this camera mount and clock offset (default: as recorded).
     """
     with open_recording(path, mount=mount) as rec:
         reference = rec.reference()
         assert reference is not None
         params = json.loads(rec.metadata["scrapcut"]["params"])
+        h, s, _ = rgb_to_hsv_deg(np.array([params["scene"]["can_rgb"]], dtype=np.uint8))[0]
+        can = HsvRange((h - 12.0) % 360.0, (h + 12.0) % 360.0, 0.85 * s, 0.25)
         distance = PolylineDistance(reference)
         out = []
         for frame in rec.frames():
-            mask = paint_mask(frame.color, PAINT_PRESETS["orange"].hsv) & np.isfinite(frame.depth)
+            mask = paint_mask(frame.color, can) & np.isfinite(frame.depth)
             v, u = np.nonzero(mask)
             points = frame.camera.unproject(u, v, frame.depth[v, u])
             out.append(distance.distance(transform_points(frame.T_base_cam, points)))

@@ -2,12 +2,15 @@
 
 ``fit_curve(points_base, method, config)`` runs the fitter named by ``method`` on a stitched
 paint cloud and returns a :class:`~scrapcut_cli.fitting.curve.Curve` running along the centre
-of the painted band. ``extrapolate_end`` gives the exploration planner the direction in which
-the line continues beyond one end of a fitted curve (the paper's Algorithm 1).
+of the painted band. ``trim_to_paint`` cuts back whatever of a curve runs past its paint at the
+ends and measures the reverse distance (curve to paint). ``extrapolate_end`` gives the
+exploration planner the direction in which the line continues beyond one end of a fitted curve
+(the paper's Algorithm 1).
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Literal
 
 import numpy as np
@@ -15,12 +18,19 @@ from numpy.typing import ArrayLike, NDArray
 
 from scrapcut_cli.config import FitMethod, ScrapcutConfig, choice_names
 from scrapcut_cli.errors import FittingError
+from scrapcut_cli.fitting._common import clip_to_extent
 from scrapcut_cli.fitting.closure import Closure, detect_closure, unobserved_arcs
 from scrapcut_cli.fitting.curve import Curve, NurbsModel
-from scrapcut_cli.fitting.nurbs import fit_nurbs, nurbs_to_geomdl, nurbs_to_geomdl_json
+from scrapcut_cli.fitting.ends import past_paint
+from scrapcut_cli.fitting.nurbs import (
+    fit_nurbs,
+    nurbs_to_geomdl,
+    nurbs_to_geomdl_json,
+    retarget_domain,
+)
 from scrapcut_cli.fitting.nurbs_closed import fit_closed_nurbs
 from scrapcut_cli.fitting.skeleton import fit_skeleton
-from scrapcut_cli.geometry import cumulative_length
+from scrapcut_cli.geometry import cumulative_length, resample_polyline
 
 __all__ = [
     "METHODS",
@@ -35,6 +45,7 @@ __all__ = [
     "fit_skeleton",
     "nurbs_to_geomdl",
     "nurbs_to_geomdl_json",
+    "trim_to_paint",
 ]
 
 METHODS = choice_names(FitMethod)
@@ -103,6 +114,33 @@ def fit_line(
         )
         curve.info["unobserved_arcs_m"] = [[a, b] for a, b in arcs]
     return curve
+
+
+def trim_to_paint(curve: Curve, paint_base: ArrayLike, *, tolerance_m: float) -> Curve:
+    """``curve`` without what runs past the paint ``paint_base`` (N, 3) at its ends by more
+    than ``tolerance_m`` (``fitting.ends.past_paint``), NURBS model included; ``info`` gains
+    ``paint_trim_m`` (per end), ``reverse_mean_m`` and ``reverse_max_m`` (curve to paint).
+    A closed curve is not trimmed (it has no ends); its reverse distance is reported."""
+    paint = np.asarray(paint_base, dtype=np.float64).reshape(-1, 3)
+    if curve.closed:  # a loop has no ends to run past: only the reverse distance is reported
+        whole = replace(past_paint(curve.polyline, paint, tolerance_m=np.inf), tolerance_m=0.0)
+        return replace(curve, info={**curve.info, **whole.info()})
+    check = past_paint(curve.points, paint, tolerance_m=tolerance_m)
+    info = {**curve.info, **check.info()}
+    if check.trims == (0.0, 0.0) or check.end - check.start <= curve.spacing_m:
+        return Curve(curve.points, curve.method, curve.nurbs, curve.spacing_m, info)
+    points = resample_polyline(
+        clip_to_extent(curve.points, check.start, check.end), curve.spacing_m
+    )
+    nurbs = curve.nurbs
+    if nurbs is not None and np.allclose(nurbs.weights, 1.0):
+        lo, hi = nurbs.domain
+        t = np.linspace(lo, hi, max(int(curve.length / 0.0002), 200))
+        s = cumulative_length(nurbs.evaluate(t))
+        a, b = np.interp([check.start, check.end], s, t)
+        knots, ctrl = retarget_domain(nurbs.knots, nurbs.control_points, nurbs.degree, a, b)
+        nurbs = NurbsModel(nurbs.degree, knots, ctrl, np.ones(len(ctrl)))
+    return Curve(points, curve.method, nurbs, curve.spacing_m, info)
 
 
 def extrapolate_end(

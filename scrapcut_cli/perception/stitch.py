@@ -129,6 +129,7 @@ class _VoxelMap:
         self.sums = np.zeros((0, 3))
         self.counts = np.zeros(0, dtype=np.int64)
         self.viewpoints = np.zeros((0, 3))
+        self.rgb_sums = np.zeros((0, 3))  # NaN once a point of unknown colour fell in
 
     def __len__(self) -> int:
         return int(self.keys.size)
@@ -137,8 +138,14 @@ class _VoxelMap:
     def points(self) -> FloatArray:
         return np.asarray(self.sums / self.counts[:, None])
 
-    def add(self, points: FloatArray, viewpoint: FloatArray) -> int:
-        """Merge points (N, 3); new voxels remember ``viewpoint`` (3,). Returns voxels added."""
+    @property
+    def rgb(self) -> FloatArray:
+        """Mean sRGB (N, 3) in 0-1 of what fell in each voxel (NaN: unknown)."""
+        return np.asarray(self.rgb_sums / self.counts[:, None])
+
+    def add(self, points: FloatArray, viewpoint: FloatArray, rgb: ArrayLike | None = None) -> int:
+        """Merge points (N, 3) with sRGB colours ``rgb`` (N, 3) in 0-1 (None: unknown); new
+        voxels remember ``viewpoint`` (3,). Returns voxels added."""
         if len(points) == 0:
             return 0
         try:
@@ -154,15 +161,25 @@ class _VoxelMap:
         sums = np.column_stack(
             [np.bincount(inverse, weights=points[:, i], minlength=keys.size) for i in range(3)]
         )
+        colours = (
+            np.full((len(points), 3), np.nan)
+            if rgb is None or len(rgb) != len(points)  # type: ignore[arg-type]
+            else np.asarray(rgb, dtype=np.float64)
+        )
+        rgb_sums = np.column_stack(
+            [np.bincount(inverse, weights=colours[:, i], minlength=keys.size) for i in range(3)]
+        )
         pos = np.searchsorted(self.keys, keys)
         found = pos < self.keys.size
         found[found] = self.keys[pos[found]] == keys[found]
         self.sums[pos[found]] += sums[found]
+        self.rgb_sums[pos[found]] += rgb_sums[found]
         self.counts[pos[found]] += counts[found]
         new = ~found
         at = pos[new]
         self.keys = np.insert(self.keys, at, keys[new])
         self.sums = np.insert(self.sums, at, sums[new], axis=0)
+        self.rgb_sums = np.insert(self.rgb_sums, at, rgb_sums[new], axis=0)
         self.counts = np.insert(self.counts, at, counts[new])
         self.viewpoints = np.insert(
             self.viewpoints, at, np.broadcast_to(viewpoint, (int(new.sum()), 3)), axis=0
@@ -225,6 +242,9 @@ class Stitcher:
         self.perception = perception
         self._paint = _VoxelMap(config.voxel_size_m, option="--stitch-voxel-mm")
         self._surface = _VoxelMap(perception.surface_voxel_m, option="--surface-voxel-mm")
+        # The filter's duller colour clusters (rust, old marks): kept apart from the paint and
+        # its size(k), for line selection to report.
+        self._other = _VoxelMap(config.voxel_size_m, option="--stitch-voxel-mm")
         self.steps: list[StitchStep] = []
 
     @property
@@ -238,6 +258,21 @@ class Stitcher:
     @property
     def paint_viewpoints(self) -> FloatArray:
         return self._paint.viewpoints.copy()
+
+    @property
+    def paint_rgb(self) -> FloatArray:
+        """Mean sRGB (N, 3) in 0-1 of each paint voxel (NaN where unknown)."""
+        return self._paint.rgb
+
+    @property
+    def other_points(self) -> FloatArray:
+        """Voxels (P, 3) of the filter's duller colour clusters, metres, base frame."""
+        return self._other.points
+
+    @property
+    def other_rgb(self) -> FloatArray:
+        """Their mean sRGB (P, 3) in 0-1."""
+        return self._other.rgb
 
     @property
     def surface_points(self) -> FloatArray:
@@ -257,17 +292,20 @@ class Stitcher:
         k = len(self.steps)
         before = self.size
         icp: IcpOutcome | None = None
-        paint, surface = clouds.paint_base, clouds.surface_base
+        paint, surface, other = clouds.paint_base, clouds.surface_base, clouds.other_base
         if clouds.skip_reason is None and len(paint):
             if self.config.icp:
                 icp = self._refine(paint)
                 if icp.accepted:
                     paint = transform_points(icp.T_correction, paint)
                     surface = transform_points(icp.T_correction, surface)
+                    if len(other):
+                        other = transform_points(icp.T_correction, other)
                     pose = icp.T_correction @ pose
             viewpoint = np.asarray(pose[:3, 3], dtype=np.float64)
-            self._paint.add(paint, viewpoint)
+            self._paint.add(paint, viewpoint, clouds.paint_rgb)
             self._surface.add(surface, viewpoint)
+            self._other.add(other, viewpoint, clouds.other_rgb)
         step = StitchStep(
             k=k,
             frame_index=clouds.frame_index,
@@ -381,6 +419,15 @@ class StitchResult:
         Metres, base frame (see :class:`Stitcher`).
     surface_points, surface_viewpoints : (M, 3) float64
         Metres, base frame.
+    paint_rgb : (N, 3) float64
+        Mean sRGB in 0-1 of each paint point's pixels (NaN where unknown).
+    other_points, other_rgb : (P, 3) float64
+        The filter's duller colour clusters (rust, old marks), stitched apart from the paint.
+    view_centres : (K, 3) float64
+        Where each frame's optical axis met the surface, in frame order, metres, base frame
+        (1 m along the axis when the image centre has no depth): the track the scan followed.
+    view_origins : (K, 3) float64
+        The camera centres of those frames: ``views`` pairs them into sight lines.
     steps : list of StitchStep
         One per frame, in order.
     tally : PerceptionTally
@@ -399,6 +446,32 @@ class StitchResult:
     tally: PerceptionTally
     hsv: HsvRange
     base_frame: str = ""
+    paint_rgb: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    view_centres: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    other_points: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    other_rgb: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    view_origins: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+
+    @property
+    def views(self) -> FloatArray:
+        """(K, 2, 3) sight lines (camera centre, view centre) of the frames, base frame."""
+        if len(self.view_origins) != len(self.view_centres):
+            return np.asarray(self.view_centres).reshape(-1, 1, 3).repeat(2, axis=1)
+        return np.stack([self.view_origins, self.view_centres], axis=1)
+
+    @property
+    def all_paint_points(self) -> FloatArray:
+        """The paint and the duller clusters, (N + P, 3): what line selection splits."""
+        return np.vstack([self.paint_points, self.other_points])
+
+    @property
+    def all_paint_rgb(self) -> FloatArray:
+        """Their colours (N + P, 3), in the same order."""
+        return np.vstack([self._rgb(self.paint_rgb, self.paint_points), self.other_rgb])
+
+    @staticmethod
+    def _rgb(rgb: FloatArray, points: FloatArray) -> FloatArray:
+        return rgb if len(rgb) == len(points) else np.full((len(points), 3), np.nan)
 
     @property
     def size(self) -> int:
@@ -455,10 +528,15 @@ def stitch_recording(
     stitcher = Stitcher(config.stitch, perception=config.perception)
     tally = PerceptionTally(hsv)
     base_frame = ""
+    centres: list[FloatArray] = []
+    origins: list[FloatArray] = []
     for frame in frames:
         base_frame = frame.base_frame
         clouds = process_frame(frame, hsv, config.perception)
         tally.add(clouds, frame.color)
+        origins.append(clouds.T_base_cam[:3, 3].copy())
+        centre = clouds.view_centre
+        centres.append(centre if centre is not None else origins[-1] + clouds.T_base_cam[:3, 2])
         step = stitcher.add(clouds, T_base_cam=frame.T_base_cam)
         if progress is not None:
             progress(step)
@@ -472,4 +550,9 @@ def stitch_recording(
         tally=tally,
         hsv=hsv,
         base_frame=base_frame,
+        paint_rgb=stitcher.paint_rgb,
+        view_centres=np.asarray(centres, dtype=np.float64).reshape(-1, 3),
+        view_origins=np.asarray(origins, dtype=np.float64).reshape(-1, 3),
+        other_points=stitcher.other_points,
+        other_rgb=stitcher.other_rgb,
     )

@@ -75,6 +75,9 @@ class ScrapObject:
     closed : bool
         The line is a loop: ``reference`` runs once around it and does not repeat its first
         point (the last point joins the first).
+    painted : TriMesh or None
+        The surface the line was sprayed across when it is not the mesh (the basket's
+        envelope over its wires), base frame; other marks are sprayed across it too.
     """
 
     name: str
@@ -87,6 +90,7 @@ class ScrapObject:
     T_base_object: FloatArray
     seed: int = 0
     closed: bool = False
+    painted: TriMesh | None = None
 
     @property
     def mesh(self) -> TriMesh:
@@ -99,6 +103,9 @@ class ScrapObject:
         if self.closed:
             return np.asarray(np.vstack([self.reference, self.reference[:1]]))
         return self.reference
+    def painted_surface(self) -> TriMesh:
+        """The surface paint is sprayed across: ``painted``, else the mesh."""
+        return self.painted if self.painted is not None else self.mesh
 
     @property
     def reference_length_m(self) -> float:
@@ -515,4 +522,5 @@ def make_object(name: str, *, seed: int = 0, placement: ArrayLike | None = None)
         T_base_object=T,
         seed=int(seed),
         closed=built.closed,
+        painted=painted if built.painted_surface is not None else None,
     )

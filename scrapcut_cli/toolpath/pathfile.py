@@ -49,6 +49,7 @@ def path_to_dict(
     frame_id: str,
     created: str | None = None,
     calibration: Mapping[str, Any] | None = None,
+    selection: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The path file as a JSON-ready dictionary.
 
@@ -57,6 +58,8 @@ def path_to_dict(
     time stamp; default now (UTC) — pass a fixed one for byte-identical files.
     ``calibration``: the camera mount and clock offset the frames were posed with, when not
     the recording's own (``--calibration`` / ``--self-calibrate``); stored as ``calibration``.
+    ``selection``: the line-selection report (the line, every rejected candidate); stored as
+    ``selection``.
     """
     if created is None:
         created = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
@@ -98,6 +101,7 @@ def path_to_dict(
         },
         "config": _jsonable(dict(config)),
         **({} if calibration is None else {"calibration": _jsonable(dict(calibration))}),
+        **({} if selection is None else {"selection": _jsonable(dict(selection))}),
     }
 
 
