@@ -290,7 +290,7 @@ class SelectionConfig:
     ``pick``: ``scan`` (the candidate the scan follows), ``longest``, ``nearest-start`` (nearest
     to where the scan started) or ``all`` (one path per line-like candidate). Paint within
     ``link_m`` is one candidate (45 mm bridges a 40 mm wire mesh's gaps); a stroke is at least
-    ``min_elongation`` times as long as wide; a candidate less saturated than the line by
+    ``min_elongation`` times as long as wide and at most ``max_width_m`` wide; a candidate less saturated than the line by
     ``dull_margin`` of its saturation is another paint (an old mark, rust); paint farther than
     ``off_surface_m`` from every sight line (camera to view centre) was never looked at;
     duller paint within ``rim_m`` of the line is its own thin edge.
@@ -312,6 +312,15 @@ class SelectionConfig:
     min_points: int = rng(30, 1, 1_000_000, "", "a count of voxels")
     min_elongation: float = rng(
         3.0, 1.0, 100.0, "", "a stroke is longer than wide; 100 is a 2.5 m line of a 25 mm stroke"
+    )
+    # a stroke's width measured on the stitched paint (twice the 90 % quantile of the offsets)
+    max_width_m: float = rng(
+        0.08,
+        0.005,
+        1.0,
+        "m",
+        "spray-can strokes are 2-5 cm wide (with overspray and a wire mesh's two layers ~4 cm); "
+        "1 m is a wrist camera's whole view",
     )
     dull_margin: float = rng(
         0.12,

@@ -18,14 +18,15 @@ into candidates and keeps the line:
 3. **Shape.** Each candidate's length is the geodesic diameter of its cell graph; its width
    twice the 90 % quantile of its points' distance to that path, and how much the width
    varies along it (per window of two widths). A stroke is at least ``min_elongation`` times
-   as long as wide; boxes, cones and gloves are not.
+   as long as wide and at most ``max_width_m`` wide; boxes, cones, gloves and rusty areas are
+   not.
 4. **The scan.** Each frame looked along its optical axis, from the camera to the surface it
    met (its view centre; through a wire mesh that is the floor behind, so the whole sight line
    counts, not its end); a candidate's ``follow`` is the share of these sight lines passing
    within ``follow_m`` of it. The marked line is the one the scan follows. Paint farther than
    ``off_surface_m`` from every sight line was never looked at: off the scanned surface.
-5. **The line's own paint.** The line-like candidate the scan follows most (without view
-   centres: the most saturated one) sets the paint's colour; candidates duller than it by
+5. **The line's own paint.** Of the line-like candidates the scan follows (at least half as
+   much as the most followed one), the most saturated sets the paint's colour; candidates duller than it by
    ``dull_margin`` of its saturation are another paint: a faded old mark if stroke-like, else
    dull paint (rust, primer). Duller voxels within ``rim_m`` of the line are its own thin
    edge (sprayed edges and JPEG's chroma subsampling desaturate it) and join it.
@@ -518,20 +519,32 @@ def _line_like(shapes: list[_Shape], scanned: bool, config: SelectionConfig) -> 
         for s in shapes
         if len(s.points) >= config.min_points
         and not s.mixed
-        and s.length_m >= config.min_elongation * s.width_m
+        and _is_stroke(s, config)
         and (not scanned or s.scan_distance_m <= config.off_surface_m)
     ]
 
 
+def _is_stroke(s: _Shape, config: SelectionConfig) -> bool:
+    """Shaped like a stroke: long for its width, and no wider than a stroke."""
+    return s.length_m >= config.min_elongation * s.width_m and s.width_m <= config.max_width_m
+
+
 def _reference(shapes: list[_Shape], scanned: bool, config: SelectionConfig) -> _Shape:
-    """The line-like candidate that sets the paint's colour: the one the scan follows most,
-    else the most saturated one (raises when there is none)."""
+    """The line-like candidate that sets the paint's colour: of those the scan follows at
+    least half as much as the most followed one, the most saturated (fresh marking paint is
+    the most saturated thing on a piece; rust around a line is followed as much as the line);
+    without a scan, the most saturated one. Raises when there is none."""
     near = _line_like(shapes, scanned, config)
     if not near:
         raise PerceptionError(_no_line_message(shapes, scanned, config))
     if scanned:
-        return max(near, key=lambda s: (s.follow, np.nan_to_num(_sat(s)), s.length_m))
-    return max(near, key=lambda s: (np.nan_to_num(_sat(s)), s.length_m))
+        most = max(s.follow for s in near)
+        near = [s for s in near if s.follow >= _FOLLOWED * most]
+    return max(near, key=lambda s: (np.nan_to_num(_sat(s)), s.follow, s.length_m))
+
+
+#: A candidate the scan follows this share as much as the most followed one is followed too.
+_FOLLOWED = 0.5
 
 
 def _sat(s: _Shape) -> float:
@@ -580,14 +593,15 @@ def _kind(
             f"saturation {_sat(s):.2f} between the paint's and a duller colour's: paint on "
             "rust, a thin edge, overspray"
         )
-    is_stroke = s.length_m >= config.min_elongation * s.width_m
+    is_stroke = _is_stroke(s, config)
     if _sat(s) < dull_below:
         kind = KIND_FADED if is_stroke else KIND_DULL
         return kind, f"saturation {_sat(s):.2f} below the line's paint ({dull_below:.2f})"
     if not is_stroke:
         return KIND_BLOB, (
             f"not a stroke: {1000 * s.length_m:.0f} mm long, {1000 * s.width_m:.0f} mm wide "
-            f"(a stroke is {config.min_elongation:g}x as long as wide)"
+            f"(a stroke is {config.min_elongation:g}x as long as wide, at most "
+            f"{1000 * config.max_width_m:.0f} mm)"
         )
     if scanned and s.scan_distance_m > config.off_surface_m:
         return KIND_OFF_SURFACE, (
