@@ -290,9 +290,10 @@ class SelectionConfig:
     ``pick``: ``scan`` (the candidate the scan follows), ``longest``, ``nearest-start`` (nearest
     to where the scan started) or ``all`` (one path per line-like candidate). Paint within
     ``link_m`` is one candidate (45 mm bridges a 40 mm wire mesh's gaps); a stroke is at least
-    ``min_elongation`` times as long as wide and at most ``max_width_m`` wide; a candidate less saturated than the line by
-    ``dull_margin`` of its saturation is another paint (an old mark, rust); paint farther than
-    ``off_surface_m`` from every sight line (camera to view centre) was never looked at;
+    ``min_elongation`` times as long as wide and at most ``max_width_m`` wide; a candidate less
+    saturated than the line by ``dull_margin`` of its saturation is another paint (an old mark,
+    rust); paint farther than ``off_surface_m`` from every sight line (camera to view centre)
+    was never looked at;
     duller paint within ``rim_m`` of the line is its own thin edge.
     """
 

@@ -26,10 +26,11 @@ into candidates and keeps the line:
    within ``follow_m`` of it. The marked line is the one the scan follows. Paint farther than
    ``off_surface_m`` from every sight line was never looked at: off the scanned surface.
 5. **The line's own paint.** Of the line-like candidates the scan follows (at least half as
-   much as the most followed one), the most saturated sets the paint's colour; candidates duller than it by
-   ``dull_margin`` of its saturation are another paint: a faded old mark if stroke-like, else
-   dull paint (rust, primer). Duller voxels within ``rim_m`` of the line are its own thin
-   edge (sprayed edges and JPEG's chroma subsampling desaturate it) and join it.
+   much as the most followed one), the most saturated sets the paint's colour; candidates
+   duller than it by ``dull_margin`` of its saturation are another paint: a faded old mark if
+   stroke-like, else dull paint (rust, primer). Duller voxels within ``rim_m`` of the line are
+   its own thin edge (sprayed edges and JPEG's chroma subsampling desaturate it) and join
+   it.
 6. **The pick.** Among the line-like candidates of the paint's colour near the scan:
    ``scan`` (default) the one the scan follows, ``longest``, ``nearest-start`` (nearest to the
    first sight line, where the worker pointed the robot) or ``all``. When more than one was
