@@ -52,8 +52,8 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
-from scrapcut_cli.config import SelectionConfig
-from scrapcut_cli.errors import PerceptionError
+from scrapcut_cli.config import SelectionConfig, validate_section
+from scrapcut_cli.errors import ConfigError, PerceptionError
 from scrapcut_cli.geometry import (
     cumulative_length,
     pack_voxel_keys,
@@ -184,27 +184,14 @@ class LineSelection:
 
 
 def check_selection_config(config: SelectionConfig) -> None:
-    """PerceptionError naming the first selection parameter out of its range."""
+    """PerceptionError naming the first selection parameter out of its range (the ranges
+    declared in ``config.SelectionConfig``) or an unknown pick."""
     if config.pick not in PICKS:
         raise PerceptionError(f"unknown selection.pick {config.pick!r}; known: {', '.join(PICKS)}")
-    positive = {
-        "link_m": config.link_m,
-        "cell_m": config.cell_m,
-        "min_elongation": config.min_elongation,
-        "follow_m": config.follow_m,
-        "off_surface_m": config.off_surface_m,
-    }
-    for name, value in positive.items():
-        if not (np.isfinite(value) and value > 0):
-            raise PerceptionError(f"selection.{name} must be a number > 0, got {value}")
-    if not (np.isfinite(config.rim_m) and config.rim_m >= 0):
-        raise PerceptionError(f"selection.rim_m must be >= 0, got {config.rim_m}")
-    if not 0.0 <= config.dull_margin < 1.0:
-        raise PerceptionError(
-            f"selection.dull_margin must be within [0, 1), got {config.dull_margin}"
-        )
-    if config.min_points < 1:
-        raise PerceptionError(f"selection.min_points must be >= 1, got {config.min_points}")
+    try:
+        validate_section(config, "selection")
+    except ConfigError as exc:
+        raise PerceptionError(str(exc)) from None
 
 
 def select_line(
