@@ -21,7 +21,6 @@ import hashlib
 import json
 import os
 import stat
-import struct
 import tempfile
 from collections.abc import Collection, Generator, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
