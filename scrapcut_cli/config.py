@@ -1210,6 +1210,10 @@ def _coerce(value: Any, declared: str, key: str) -> Any:
         if not isinstance(value, str):
             raise ConfigError(f"{key} must be a string, got {value!r}")
         return value
+    if kind.startswith("tuple[str"):
+        if not isinstance(value, list | tuple) or any(not isinstance(v, str) for v in value):
+            raise ConfigError(f"{key} must be a list of names, got {value!r}")
+        return tuple(value)
     if kind.startswith("tuple"):
         if not isinstance(value, list | tuple):
             raise ConfigError(f"{key} must be a list of numbers, got {value!r}")
