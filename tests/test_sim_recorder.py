@@ -294,7 +294,9 @@ def test_frames_while_moving_are_rendered_at_the_capture_time_the_truth_names(
     assert len(d_true) > 300
     assert d_true.max() <= half + 0.0006
     d_published, _ = paint_distances(path)
-    assert d_published.max() > half + 0.001
+    # The can's solid colour stops short of the stroke's thin edge (~1.6 mm here): compare with
+    # the same pixels posed with the truth.
+    assert d_published.max() > d_true.max() + 0.001
 
 
 def test_same_seed_same_bytes(tmp_path: Path) -> None:

@@ -65,6 +65,9 @@ SKIP_NO_VALID_DEPTH = "no_valid_depth"
 SKIP_TOO_LITTLE_PAINT = "too_little_paint"
 #: More of the image in the paint's colour than PerceptionConfig.max_paint_share: no stroke.
 SKIP_PAINT_FILLS_IMAGE = "paint_fills_image"
+#: The paint's colour only in blobs wider than PerceptionConfig.max_stroke_width_m (a crate, a
+#: cone, a painted wall): kept apart as other paint, no stroke.
+SKIP_PAINT_TOO_WIDE = "paint_too_wide"
 
 
 @dataclass(frozen=True, eq=False)
@@ -86,8 +89,8 @@ class FrameClouds:
     T_base_cam : (4, 4) float64
         The camera pose the points were projected with.
     skip_reason : str or None
-        ``no_paint``, ``scattered_paint``, ``no_valid_depth`` or ``too_little_paint`` when
-        ``paint_base`` is empty.
+        ``no_paint``, ``scattered_paint``, ``no_valid_depth``, ``too_little_paint``,
+        ``paint_too_wide`` or ``paint_fills_image`` when ``paint_base`` is empty.
     paint_rgb : (N, 3) float32
         Mean sRGB (0-1) of the pixels behind each paint point (empty: colour unknown).
     other_base : (P, 3) float64
@@ -665,6 +668,8 @@ def process_frame(frame: Frame, hsv: HsvRange, config: PerceptionConfig) -> Fram
         # Scattered specks (rust lifted into the range by noise, overspray) and paint without
         # usable depth need different remedies; telling them apart costs a second filter on
         # skipped frames only.
+        if strokes.size == 0 and wide.size:
+            return skipped(SKIP_PAINT_TOO_WIDE, paint_pixels, 0)
         solid, _ = _solid_paint(frame, filtered, config, max_width_m=0.0)
         return skipped(SKIP_NO_VALID_DEPTH if solid.size else SKIP_SCATTERED_PAINT, paint_pixels, 0)
     paint, paint_rgb = _thin(frame, points, pixels, config)
@@ -777,6 +782,11 @@ class PerceptionTally:
             hints.append("check the depth range (--min-depth-mm/--max-depth-mm)")
         if self.skip_reasons[SKIP_TOO_LITTLE_PAINT]:
             hints.append("lower --min-paint-points")
+        if self.skip_reasons[SKIP_PAINT_TOO_WIDE]:
+            hints.append(
+                "the paint's colour lies only in blobs wider than a stroke (a crate, a cone, a "
+                "wall): raise perception.max_stroke_width_m (--config) if the line is that wide"
+            )
         if self.skip_reasons[SKIP_PAINT_FILLS_IMAGE]:
             hints.append(
                 "the colour range covers most of the image, not a stroke (a paint-coloured "
