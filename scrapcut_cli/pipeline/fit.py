@@ -4,12 +4,13 @@
 stitches its paint and surface (:func:`~scrapcut_cli.perception.stitch.stitch_recording`) and
 finds the marked line among the paint's candidates
 (:func:`~scrapcut_cli.perception.candidates.select_line`) into a :class:`StitchedRecording`;
-:func:`fit_stitched` fits the curve to the line's paint (:func:`~scrapcut_cli.fitting.fit_line`:
-open or closed), cuts back what runs past that paint (:func:`~scrapcut_cli.fitting.trim_to_paint`) and makes the
-cutting path (:func:`~scrapcut_cli.toolpath.setpoints.make_cutting_path`) into a
-:class:`FitResult` that knows how to become a path file. Split in two so that one stitched
-recording serves several methods (a sweep in ``reproduce``) or several lines (``--pick all``)
-and an exploration replay can start from the planner's own clouds.
+:func:`fit_stitched` fits the curve to the line's paint
+(:func:`~scrapcut_cli.fitting.fit_line`: open or closed), cuts back what runs past that paint
+(:func:`~scrapcut_cli.fitting.trim_to_paint`) and makes the cutting path
+(:func:`~scrapcut_cli.toolpath.setpoints.make_cutting_path`) into a :class:`FitResult` that
+knows how to become a path file. Split in two so that one stitched recording serves several
+methods (a sweep in ``reproduce``) or several lines (``--pick all``) and an exploration replay
+can start from the planner's own clouds.
 :class:`~scrapcut_cli.pipeline.job.Pipeline` calls them in order; nothing here prints.
 """
 

@@ -103,6 +103,8 @@ class ScrapObject:
         if self.closed:
             return np.asarray(np.vstack([self.reference, self.reference[:1]]))
         return self.reference
+
+    @property
     def painted_surface(self) -> TriMesh:
         """The surface paint is sprayed across: ``painted``, else the mesh."""
         return self.painted if self.painted is not None else self.mesh
