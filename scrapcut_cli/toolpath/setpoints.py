@@ -33,7 +33,7 @@ from scrapcut_cli.config import ToolpathConfig
 from scrapcut_cli.errors import ToolpathError
 from scrapcut_cli.fitting.curve import Curve
 from scrapcut_cli.geometry import cumulative_length, interpolate_polyline, matrix_to_quat_xyzw
-from scrapcut_cli.toolpath.collision import choose_torch_axes
+from scrapcut_cli.toolpath.collision import TorchAxes, choose_torch_axes
 from scrapcut_cli.toolpath.ends import CutEndsDecision, cut_ends
 from scrapcut_cli.toolpath.normals import (
     estimate_path_normals,
@@ -158,19 +158,7 @@ def _cutting_path(
                 ends=ends,
             )
 
-    torch = choose_torch_axes(
-        surface_points,
-        normals,
-        tangents,
-        surface,
-        standoff_m=config.standoff_m,
-        length_m=config.torch_length_m,
-        radius_m=config.torch_radius_m,
-        max_tilt_deg=config.max_tilt_deg,
-        tilt_steps=config.tilt_steps,
-        directions=config.tilt_directions,
-        min_points=config.collision_min_points,
-    )
+    torch = torch_axes(surface_points, normals, tangents, surface, config)
     positions = surface_points + config.standoff_m * torch.axes
     orientations = matrix_to_quat_xyzw(torch_rotations(torch.axes, tangents))
 
@@ -355,3 +343,28 @@ def check_toolpath_config(config: ToolpathConfig) -> None:
         raise ToolpathError(
             f"toolpath.edge_angle_deg must be in (0, 180], got {config.edge_angle_deg}"
         )
+
+
+def torch_axes(
+    surface_points: FloatArray,
+    normals: FloatArray,
+    tangents: FloatArray,
+    surface: FloatArray,
+    config: ToolpathConfig,
+) -> TorchAxes:
+    """:func:`~scrapcut_cli.toolpath.collision.choose_torch_axes` with the torch, standoff and
+    tilt search of ``config``: the one place the toolpath's settings reach the collision check
+    (open cuts and loops alike)."""
+    return choose_torch_axes(
+        surface_points,
+        normals,
+        tangents,
+        surface,
+        standoff_m=config.standoff_m,
+        length_m=config.torch_length_m,
+        radius_m=config.torch_radius_m,
+        max_tilt_deg=config.max_tilt_deg,
+        tilt_steps=config.tilt_steps,
+        directions=config.tilt_directions,
+        min_points=config.collision_min_points,
+    )
