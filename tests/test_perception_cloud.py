@@ -400,3 +400,62 @@ def test_a_duller_cluster_and_wide_blobs_are_kept_apart_from_the_paint() -> None
     band = np.flatnonzero(((np.abs(v - 60) < 6) & (u > 10)).ravel())  # 11 px: 22 mm wide
     kept, wide = split_wide_blobs(band, depth, camera, max_width_m=0.08)
     assert np.array_equal(kept, band) and len(wide) == 0
+
+
+# --------------------------------------------------------------------------- stroke edges
+
+
+def plate_with_slot(*, hole_depth: float | None) -> tuple[Frame, float, float]:
+    """A frame looking straight down (camera frame = base frame) at a plate 0.3 m away: a
+    horizontal 25 mm stroke, and a slot (columns 150-250) that takes the stroke's top side
+    from above it to 8 mm inside it. Through the slot the floor is ``hole_depth`` away (None:
+    no depth), with a flying pixel at its rim. Returns the frame and the stroke's top and
+    bottom edges' y, metres."""
+    camera = CameraModel(640, 480, 615.0, 615.0, 319.5, 239.5, frame_id="camera_optical")
+    z = 0.3
+    h, w = camera.height, camera.width
+    v, u = np.mgrid[0:h, 0:w]
+    y = (v - camera.cy) / camera.fy * z
+    top, bottom = -HALF_WIDTH, HALF_WIDTH
+    paint = (y >= top) & (y <= bottom)
+    slot = (u >= 150) & (u < 250) & (y >= top - 0.01) & (y < top + 0.008)
+    color = np.empty((h, w, 3), dtype=np.uint8)
+    color[:] = (118, 121, 127)
+    color[paint] = (255, 110, 0)
+    color[slot] = (70, 72, 70)
+    depth = np.full((h, w), z, dtype=np.float32)
+    depth[slot] = np.nan if hole_depth is None else hole_depth
+    if hole_depth is not None:
+        rim = slot & ~np.roll(slot, 1, axis=0)  # the slot's first row: a flying pixel
+        rim |= slot & ~np.roll(slot, -1, axis=0)
+        depth[rim] = 0.5 * (z + hole_depth)
+    frame = Frame(
+        index=0,
+        stamp_ns=1_000_000_000,
+        color=color,
+        depth=depth,
+        camera=camera,
+        T_base_cam=np.eye(4),
+    )
+    return frame, top, bottom
+
+
+@pytest.mark.parametrize("hole_depth", [None, 0.425])
+def test_stroke_edges_are_where_paint_meets_metal_not_a_hole(hole_depth: float | None) -> None:
+    frame, top, bottom = plate_with_slot(hole_depth=hole_depth)
+    clouds = process_frame(frame, ORANGE, CONFIG)
+    edges = clouds.edge_base
+    assert len(edges) > 100
+    x, y = edges[:, 0], edges[:, 1]
+    pixel = 0.3 / 615.0
+    over_slot = (x > (150 - 319.5) * pixel) & (x < (250 - 319.5) * pixel)
+    # Every edge lies on one of the stroke's two sides, within a pixel.
+    on_top = np.abs(y - top) < 1.5 * pixel
+    on_bottom = np.abs(y - bottom) < 1.5 * pixel
+    assert np.all(on_top | on_bottom)
+    # The bottom side is seen all along; the top side only beside the slot, never across it,
+    # and the paint's rim inside the slot (8 mm into the stroke) is no edge.
+    assert on_bottom[over_slot].sum() > 30 and on_top[~over_slot].sum() > 100
+    inner = (x > (155 - 319.5) * pixel) & (x < (245 - 319.5) * pixel)
+    assert not on_top[inner].any()
+    assert np.all(np.abs(edges[:, 2] - 0.3) < 0.001)

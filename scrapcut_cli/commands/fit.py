@@ -341,6 +341,12 @@ def fit(
                 f"(tilted {summary['tilted']}, collision {summary['collision']}, "
                 f"no surface {summary['no_surface']}"
                 + (f", unobserved {summary['unobserved']}" if summary["closed"] else "")
+                + (
+                    f", bridged gap {confidence['bridged_gap']}, low support "
+                    f"{confidence['low_support']}"
+                    if (confidence := summary.get("confidence"))
+                    else ""
+                )
                 + f"); see 'flags' in {summary['outputs'][0]}"
             )
 
@@ -394,6 +400,19 @@ def _render(summary: dict[str, Any]) -> None:
             + (f", unobserved {summary['unobserved']})" if summary["closed"] else ")"),
         ),
         *_loop_rows(summary),
+        *(
+            [
+                (
+                    "confidence",
+                    f"σ {1000 * confidence['sigma_median_m']:.2f} mm median, "
+                    f"{1000 * confidence['sigma_max_m']:.2f} mm max; "
+                    f"{confidence['bridged_gap']} set-point(s) bridge a gap, "
+                    f"{confidence['low_support']} low support",
+                )
+            ]
+            if (confidence := summary.get("confidence"))
+            else []
+        ),
         (
             "cutting",
             f"{summary['material']} {summary['thickness_mm']:g} mm: "

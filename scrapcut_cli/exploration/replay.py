@@ -699,6 +699,7 @@ def _finish(
         paint_rgb=st.paint_rgb,
         other_points=st.other_points,
         other_rgb=st.other_rgb,
+        **st.kept_clouds(),
     )
     settings = planner_config_dict(config)
     if extra:

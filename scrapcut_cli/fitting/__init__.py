@@ -2,10 +2,13 @@
 
 ``fit_curve(points_base, method, config)`` runs the fitter named by ``method`` on a stitched
 paint cloud and returns a :class:`~scrapcut_cli.fitting.curve.Curve` running along the centre
-of the painted band. ``trim_to_paint`` cuts back whatever of a curve runs past its paint at the
-ends and measures the reverse distance (curve to paint). ``extrapolate_end`` gives the
-exploration planner the direction in which the line continues beyond one end of a fitted curve
-(the paper's Algorithm 1).
+of the painted band; given a stroke model (:func:`~scrapcut_cli.fitting.stroke.stroke_model`:
+the centre from the stroke's edges, holes not taken for edges) both fitters follow it.
+:func:`~scrapcut_cli.fitting.stroke.with_confidence` adds each curve point's confidence.
+``trim_to_paint`` cuts back whatever of a curve runs past its paint at the ends and measures the
+reverse distance (curve to paint). ``extrapolate_end`` gives the exploration planner the
+direction in which the line continues beyond one end of a fitted curve (the paper's
+Algorithm 1).
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from scrapcut_cli.fitting.nurbs import (
 )
 from scrapcut_cli.fitting.nurbs_closed import fit_closed_nurbs
 from scrapcut_cli.fitting.skeleton import fit_skeleton
+from scrapcut_cli.fitting.stroke import StrokeModel
 from scrapcut_cli.geometry import cumulative_length, resample_polyline
 
 __all__ = [
@@ -60,9 +64,12 @@ def fit_curve(
     config: ScrapcutConfig,
     *,
     closure: Closure | None = None,
+    stroke: StrokeModel | None = None,
 ) -> Curve:
     """Fit the curve of ``method`` ("nurbs" or "skeleton") to ``points_base`` (N, 3) float64,
-    metres, base frame, with that method's section of ``config``.
+    metres, base frame, with that method's section of ``config``; with ``stroke`` (the stroke
+    model of the same paint, :mod:`~scrapcut_cli.fitting.stroke`) an open fit follows the
+    stroke's centre from its edges.
 
     ``closure``: :func:`~scrapcut_cli.fitting.closure.detect_closure` of these points (and the
     surface around them); when it is closed the fit is a loop (a periodic NURBS, the
@@ -79,9 +86,9 @@ def fit_curve(
         curve.info["closure_reason"] = closure.reason
         return curve
     if method == "nurbs":
-        curve = fit_nurbs(points_base, config=config.nurbs)
+        curve = fit_nurbs(points_base, config=config.nurbs, stroke=stroke)
     else:
-        curve = fit_skeleton(points_base, config=config.skeleton)
+        curve = fit_skeleton(points_base, config=config.skeleton, stroke=stroke)
     if closure is not None:
         curve.info["closure"] = closure.info()
         curve.info["closure_reason"] = closure.reason
@@ -93,6 +100,8 @@ def fit_line(
     surface_base: ArrayLike | None,
     method: str,
     config: ScrapcutConfig,
+    *,
+    stroke: StrokeModel | None = None,
 ) -> Curve:
     """A stitched line's curve, open or closed: the global fit of a scan.
 
@@ -100,10 +109,11 @@ def fit_line(
     surface ``surface_base`` (M, 3) around it (metres, base frame; :func:`detect_closure`),
     fits ``method`` open or closed, and on a closed curve finds the arcs where neither paint
     nor surface was observed (``info["unobserved_arcs_m"]``: [start, end] metres along
-    ``points`` from its first point, end < start when an arc runs across it).
+    ``points`` from its first point, end < start when an arc runs across it). ``stroke``:
+    the stroke model an open fit follows (see :func:`fit_curve`).
     """
     closure = detect_closure(paint_base, surface_base, config=config.closure)
-    curve = fit_curve(paint_base, method, config, closure=closure)
+    curve = fit_curve(paint_base, method, config, closure=closure, stroke=stroke)
     if curve.closed:
         arcs = unobserved_arcs(
             curve.points,

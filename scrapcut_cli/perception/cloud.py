@@ -22,7 +22,15 @@ The recipe of one frame (:func:`process_frame`), in order:
    scale of the stroke instead of sensor noise, and costs 1 ms instead of 30 ms per frame;
 5. the surface band: non-paint pixels within ``surface_band_m`` (in 3-D) of the paint, sampled
    on a pixel grid about half a ``surface_voxel_m`` apart, downsampled at ``surface_voxel_m``.
-   The tool path takes its normals and collision checks from it, on both sides of the stroke.
+   The tool path takes its normals and collision checks from it, on both sides of the stroke;
+6. the stroke's edges (:func:`stroke_edge_points`): where the paint stops and metal goes on.
+   A paint pixel next to a non-paint one is an edge of the stroke only if the depth beyond it
+   shows a surface that could carry paint: a short run of valid depth continuing the paint's
+   surface. Where it shows a hole (no depth, or the background far behind, with the flying
+   pixels at the rim between), the paint's boundary is not the stroke's edge and is left out.
+   The image is where this is decided: a frame's depth says directly which neighbour of a
+   paint pixel is metal, before stitching blurs views together (``fitting.stroke`` explains
+   the choice).
 
 :class:`PerceptionTally` counts frames, pixels, points and skip reasons over a recording and
 raises the "no paint found" error with the dominant hues the images showed instead.
@@ -100,6 +108,9 @@ class FrameClouds:
     view_centre : (3,) float64 or None
         Where the optical axis meets the observed surface (metres, base frame): what the view
         looks at. None when the image centre has no depth.
+    edge_base : (E, 3) float64
+        Metres, base frame: the stroke's edges seen in this frame (paint next to metal, not
+        next to a hole), downsampled (:func:`stroke_edge_points`).
     """
 
     frame_index: int
@@ -118,6 +129,7 @@ class FrameClouds:
     other_rgb: NDArray[np.float32] = field(
         default_factory=lambda: np.zeros((0, 3), dtype=np.float32)
     )
+    edge_base: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
 
     @property
     def camera_position(self) -> FloatArray:
@@ -449,14 +461,32 @@ def _backproject(
         width = frame.depth.shape[1]
         row, col = np.divmod(solid, width)
         solid = solid[(row % stride == 0) & (col % stride == 0)]
-    usable = usable_depth_pixels(
+    usable = _usable(frame, solid, config)
+    return backproject_pixels(frame.camera, frame.depth, usable, frame.T_base_cam), usable
+
+
+def _usable(frame: Frame, pixels: NDArray[np.intp], config: PerceptionConfig) -> NDArray[np.intp]:
+    """:func:`usable_depth_pixels` with the configuration's depth gate."""
+    return usable_depth_pixels(
         frame.depth,
-        solid,
+        pixels,
         min_depth_m=config.min_depth_m,
         max_depth_m=config.max_depth_m,
         flying_pixel_ratio=config.flying_pixel_ratio,
     )
-    return backproject_pixels(frame.camera, frame.depth, usable, frame.T_base_cam), usable
+
+
+def boundary_pixels(pixels: NDArray[np.intp], shape: tuple[int, ...]) -> NDArray[np.intp]:
+    """The pixels of a set (ascending flat indices into an image of ``shape``) with a
+    4-neighbour outside the set or outside the image."""
+    height, width = int(shape[0]), int(shape[1])
+    if pixels.size == 0:
+        return pixels
+    mask = np.zeros((height + 2, width + 2), dtype=bool)
+    v, u = np.divmod(pixels, width)
+    mask[v + 1, u + 1] = True
+    inside = mask[v, u + 1] & mask[v + 2, u + 1] & mask[v + 1, u] & mask[v + 1, u + 2]
+    return pixels[~inside]
 
 
 def sampling_stride(frame: Frame, pixels: NDArray[np.intp], voxel_m: float) -> int:
@@ -600,13 +630,7 @@ def surface_band(
     band = maximum_filter(cells, size=2 * radius + 1, mode="constant") > cells
     bi, bj = np.nonzero(band)
     candidates = (bi * stride + stride // 2) * width + bj * stride + stride // 2
-    usable = usable_depth_pixels(
-        frame.depth,
-        candidates.astype(np.intp),
-        min_depth_m=config.min_depth_m,
-        max_depth_m=config.max_depth_m,
-        flying_pixel_ratio=config.flying_pixel_ratio,
-    )
+    usable = _usable(frame, candidates.astype(np.intp), config)
     points = backproject_pixels(camera, frame.depth, usable, frame.T_base_cam)
     if len(points) == 0:
         return points
@@ -615,6 +639,93 @@ def surface_band(
     coarse = voxel_downsample(paint_base, config.surface_band_m / 4.0)
     distance, _ = cKDTree(coarse).query(points, distance_upper_bound=config.surface_band_m)
     return voxel_downsample(points[np.isfinite(distance)], config.surface_voxel_m)
+
+
+#: How far beyond a paint pixel the depth must go on as a surface for its boundary to be the
+#: stroke's edge, metres (a few pixels at the wrist's distances: past one flying pixel at a
+#: hole's rim, short of the next hole of a mesh).
+EDGE_PROBE_M = 0.002
+#: At most this many pixels are probed (a far view's probe is still a few pixels).
+EDGE_PROBE_MAX_PX = 6
+
+
+def stroke_edge_points(
+    frame: Frame,
+    paint_pixels: NDArray[np.intp],
+    paint_depth_m: float,
+    config: PerceptionConfig,
+    *,
+    stroke_pixels: NDArray[np.intp] | None = None,
+) -> FloatArray:
+    """The stroke's edges seen in one frame: (E, 3) float64, metres, base frame.
+
+    ``paint_pixels`` are the usable paint pixels (ascending flat indices; valid, non-flying
+    depth); ``stroke_pixels`` all pixels of the stroke's colour (default: the same), with or
+    without usable depth: a paint pixel whose depth was dropped (beside a hole's flying
+    pixels, say) is still paint, not the metal beyond the stroke. For each usable paint pixel
+    and each of its 4-neighbours outside the stroke, the pixels
+    beyond it in that direction are probed for ``EDGE_PROBE_M`` at ``paint_depth_m`` (1 to
+    ``EDGE_PROBE_MAX_PX`` pixels): every one must be outside the paint, have depth within the
+    gate and continue
+    the surface (each step, and the whole run, within ``flying_pixel_ratio × depth`` of the
+    paint pixel's: the flying-pixel test's tolerance). Then the neighbour is metal that stayed
+    unpainted and the boundary is the stroke's edge: the midpoint of the paint pixel's and the
+    neighbour's points. A neighbour without depth, far behind (a hole's background), or a
+    flying pixel at a rim is no edge: what lies beyond the paint is unknown there. The points
+    are averaged on a voxel grid of half ``voxel_size_m``.
+    """
+    height, width = frame.depth.shape
+    if paint_pixels.size == 0:
+        return np.zeros((0, 3))
+    flat = frame.depth.reshape(-1)
+    mask = np.zeros(height * width, dtype=bool)
+    mask[paint_pixels if stroke_pixels is None else stroke_pixels] = True
+    focal = max(frame.camera.fx, frame.camera.fy)
+    probe = int(
+        np.clip(np.ceil(EDGE_PROBE_M * focal / max(paint_depth_m, 1e-3)), 1, EDGE_PROBE_MAX_PX)
+    )
+    v, u = np.divmod(paint_pixels, width)
+    z0 = np.take(flat, paint_pixels).astype(np.float64)
+    tolerance = config.flying_pixel_ratio * z0
+    inner: list[NDArray[np.intp]] = []
+    outer: list[NDArray[np.intp]] = []
+    for dv, du in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        step = dv * width + du
+        # Only the stroke's boundary pixels in this direction are probed (a few per cent of
+        # the paint), with room for the whole probe inside the image.
+        room = (
+            (u + probe * du >= 0)
+            & (u + probe * du < width)
+            & (v + probe * dv >= 0)
+            & (v + probe * dv < height)
+        )
+        at = np.flatnonzero(room)
+        at = at[~np.take(mask, paint_pixels[at] + step)]
+        start = paint_pixels[at]
+        z_start = z0[at]
+        limit = tolerance[at]
+        ok = np.ones(len(at), dtype=bool)
+        previous = z_start
+        for k in range(1, probe + 1):
+            if not ok.any():
+                break
+            pixel = start + k * step
+            ok &= ~np.take(mask, pixel)  # a gap of a pixel or two inside the paint is no edge
+            z = np.take(flat, pixel).astype(np.float64)
+            with np.errstate(invalid="ignore"):
+                ok &= (z >= config.min_depth_m) & (z <= config.max_depth_m)  # NaN fails
+                ok &= np.abs(z - previous) <= limit
+                ok &= np.abs(z - z_start) <= limit
+            previous = z
+        inner.append(start[ok])
+        outer.append(start[ok] + step)
+    p = np.concatenate(inner)
+    if p.size == 0:
+        return np.zeros((0, 3))
+    q = np.concatenate(outer)
+    a = backproject_pixels(frame.camera, frame.depth, p, frame.T_base_cam)
+    b = backproject_pixels(frame.camera, frame.depth, q, frame.T_base_cam)
+    return voxel_downsample(0.5 * (a + b), 0.5 * config.voxel_size_m)
 
 
 # --------------------------------------------------------------------------- the recipe
@@ -688,6 +799,14 @@ def process_frame(frame: Frame, hsv: HsvRange, config: PerceptionConfig) -> Fram
     depth = frame.depth.reshape(-1)[pixels[:: max(1, len(pixels) // 512)]]
     paint_depth = float(np.percentile(depth, 25))
     surface = surface_band(frame, pixels, paint, paint_depth, config)
+    # Edges are probed from every boundary pixel of the stroke, not only from the sampled ones.
+    edges = stroke_edge_points(
+        frame,
+        _usable(frame, boundary_pixels(strokes, frame.depth.shape), config),
+        paint_depth,
+        config,
+        stroke_pixels=strokes,
+    )
     return FrameClouds(
         frame.index,
         frame.stamp_ns,
@@ -700,6 +819,7 @@ def process_frame(frame: Frame, hsv: HsvRange, config: PerceptionConfig) -> Fram
         view_centre=centre,
         other_base=other,
         other_rgb=other_rgb,
+        edge_base=edges,
     )
 
 

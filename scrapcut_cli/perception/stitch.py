@@ -119,7 +119,9 @@ class _VoxelMap:
     """Running-mean points on a world-aligned voxel grid, keyed by packed voxel index.
 
     Keys are kept sorted, so a frame is merged with one ``searchsorted`` and one ``insert``
-    (vectorised, no Python loop over points) and the output order is deterministic.
+    (vectorised, no Python loop over points) and the output order is deterministic. Each voxel
+    also counts the frames that put a point in it (``frames``): a voxel's points are averaged,
+    its frames say how often it was seen.
     """
 
     def __init__(self, voxel_size_m: float, *, option: str) -> None:
@@ -128,6 +130,7 @@ class _VoxelMap:
         self.keys = np.zeros(0, dtype=np.int64)
         self.sums = np.zeros((0, 3))
         self.counts = np.zeros(0, dtype=np.int64)
+        self.frames = np.zeros(0, dtype=np.int64)
         self.viewpoints = np.zeros((0, 3))
         self.rgb_sums = np.zeros((0, 3))  # NaN once a point of unknown colour fell in
 
@@ -175,12 +178,14 @@ class _VoxelMap:
         self.sums[pos[found]] += sums[found]
         self.rgb_sums[pos[found]] += rgb_sums[found]
         self.counts[pos[found]] += counts[found]
+        self.frames[pos[found]] += 1
         new = ~found
         at = pos[new]
         self.keys = np.insert(self.keys, at, keys[new])
         self.sums = np.insert(self.sums, at, sums[new], axis=0)
         self.rgb_sums = np.insert(self.rgb_sums, at, rgb_sums[new], axis=0)
         self.counts = np.insert(self.counts, at, counts[new])
+        self.frames = np.insert(self.frames, at, 1)
         self.viewpoints = np.insert(
             self.viewpoints, at, np.broadcast_to(viewpoint, (int(new.sum()), 3)), axis=0
         )
@@ -230,6 +235,11 @@ class Stitcher:
         Camera centre of the first frame that saw each paint voxel.
     surface_points, surface_viewpoints : (M, 3) float64
         The same for the non-paint surface band (normals point towards the viewpoint).
+    edge_points : (E, 3) float64
+        The stroke's edges (paint next to metal, ``perception.cloud.stroke_edge_points``), one
+        point per occupied paint-sized voxel.
+    paint_frames, surface_frames, edge_frames : (N,), (M,), (E,) int64
+        How many frames put a point in each voxel.
     size : int
         Number of occupied paint voxels: Algorithm 1's size(k).
     steps : list of StitchStep
@@ -245,6 +255,7 @@ class Stitcher:
         # The filter's duller colour clusters (rust, old marks): kept apart from the paint and
         # its size(k), for line selection to report.
         self._other = _VoxelMap(config.voxel_size_m, option="--stitch-voxel-mm")
+        self._edges = _VoxelMap(config.voxel_size_m, option="--stitch-voxel-mm")
         self.steps: list[StitchStep] = []
 
     @property
@@ -282,6 +293,22 @@ class Stitcher:
     def surface_viewpoints(self) -> FloatArray:
         return self._surface.viewpoints.copy()
 
+    @property
+    def edge_points(self) -> FloatArray:
+        return self._edges.points
+
+    @property
+    def paint_frames(self) -> NDArray[np.int64]:
+        return self._paint.frames.copy()
+
+    @property
+    def surface_frames(self) -> NDArray[np.int64]:
+        return self._surface.frames.copy()
+
+    @property
+    def edge_frames(self) -> NDArray[np.int64]:
+        return self._edges.frames.copy()
+
     def add(self, clouds: FrameClouds, *, T_base_cam: ArrayLike | None = None) -> StitchStep:
         """Merge one frame's clouds; returns its step (size, growth, ICP outcome).
 
@@ -292,7 +319,8 @@ class Stitcher:
         k = len(self.steps)
         before = self.size
         icp: IcpOutcome | None = None
-        paint, surface, other = clouds.paint_base, clouds.surface_base, clouds.other_base
+        paint, surface = clouds.paint_base, clouds.surface_base
+        other, edges = clouds.other_base, clouds.edge_base
         if clouds.skip_reason is None and len(paint):
             if self.config.icp:
                 icp = self._refine(paint)
@@ -301,11 +329,14 @@ class Stitcher:
                     surface = transform_points(icp.T_correction, surface)
                     if len(other):
                         other = transform_points(icp.T_correction, other)
+                    if len(edges):
+                        edges = transform_points(icp.T_correction, edges)
                     pose = icp.T_correction @ pose
             viewpoint = np.asarray(pose[:3, 3], dtype=np.float64)
             self._paint.add(paint, viewpoint, clouds.paint_rgb)
             self._surface.add(surface, viewpoint)
             self._other.add(other, viewpoint, clouds.other_rgb)
+            self._edges.add(edges, viewpoint)
         step = StitchStep(
             k=k,
             frame_index=clouds.frame_index,
@@ -321,6 +352,17 @@ class Stitcher:
         )
         self.steps.append(step)
         return step
+
+    def kept_clouds(self) -> dict[str, Any]:
+        """The edges and per-voxel frame counts, as :class:`StitchResult` keywords."""
+        return {
+            "edge_points": self.edge_points,
+            "paint_frames": self.paint_frames,
+            "surface_frames": self.surface_frames,
+            "edge_frames": self.edge_frames,
+            "other_frames": self._other.frames.copy(),
+            "other_viewpoints": self._other.viewpoints.copy(),
+        }
 
     # ------------------------------------------------------------------ ICP
 
@@ -428,6 +470,12 @@ class StitchResult:
         (1 m along the axis when the image centre has no depth): the track the scan followed.
     view_origins : (K, 3) float64
         The camera centres of those frames: ``views`` pairs them into sight lines.
+    edge_points : (E, 3) float64
+        The stroke's edges, metres, base frame (see :class:`Stitcher`).
+    paint_frames, surface_frames, edge_frames, other_frames : (N,), (M,), (E,), (P,) int64
+        Frames that saw each point's voxel (empty when not kept).
+    other_viewpoints : (P, 3) float64
+        The camera centre that first saw each of the duller clusters' voxels.
     steps : list of StitchStep
         One per frame, in order.
     tally : PerceptionTally
@@ -451,6 +499,12 @@ class StitchResult:
     other_points: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
     other_rgb: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
     view_origins: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    edge_points: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    paint_frames: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    surface_frames: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    edge_frames: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    other_frames: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    other_viewpoints: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
 
     @property
     def views(self) -> FloatArray:
@@ -468,6 +522,23 @@ class StitchResult:
     def all_paint_rgb(self) -> FloatArray:
         """Their colours (N + P, 3), in the same order."""
         return np.vstack([self._rgb(self.paint_rgb, self.paint_points), self.other_rgb])
+
+    @property
+    def all_paint_frames(self) -> NDArray[np.int64]:
+        """Frames that saw each of those points (N + P,); empty when not kept for all."""
+        if len(self.paint_frames) != len(self.paint_points) or len(self.other_frames) != len(
+            self.other_points
+        ):
+            return np.zeros(0, dtype=np.int64)
+        return np.concatenate([self.paint_frames, self.other_frames])
+
+    @property
+    def all_paint_viewpoints(self) -> FloatArray:
+        """The camera centre that first saw each of those points (N + P, 3); empty when not
+        kept for all."""
+        if len(self.other_viewpoints) != len(self.other_points):
+            return np.zeros((0, 3))
+        return np.vstack([self.paint_viewpoints, self.other_viewpoints])
 
     @staticmethod
     def _rgb(rgb: FloatArray, points: FloatArray) -> FloatArray:
@@ -555,4 +626,5 @@ def stitch_recording(
         view_origins=np.asarray(origins, dtype=np.float64).reshape(-1, 3),
         other_points=stitcher.other_points,
         other_rgb=stitcher.other_rgb,
+        **stitcher.kept_clouds(),
     )

@@ -1,12 +1,14 @@
 """The pipeline's first steps: recording → stitched clouds → the line → curve → cutting path.
 
 :func:`stitch_recording_file` reads a recording (through :mod:`scrapcut_cli.recording`),
-stitches its paint and surface (:func:`~scrapcut_cli.perception.stitch.stitch_recording`) and
-finds the marked line among the paint's candidates
-(:func:`~scrapcut_cli.perception.candidates.select_line`) into a :class:`StitchedRecording`;
-:func:`fit_stitched` fits the curve to the line's paint
-(:func:`~scrapcut_cli.fitting.fit_line`: open or closed), cuts back what runs past that paint
-(:func:`~scrapcut_cli.fitting.trim_to_paint`) and makes the cutting path
+stitches its paint, surface and stroke edges
+(:func:`~scrapcut_cli.perception.stitch.stitch_recording`) and finds the marked line among the
+paint's candidates (:func:`~scrapcut_cli.perception.candidates.select_line`) into a
+:class:`StitchedRecording`; :func:`fit_stitched` fits the curve to the line's paint
+(:func:`~scrapcut_cli.fitting.fit_line`: open or closed; an open fit follows the stroke model of
+the stitched edges, :func:`~scrapcut_cli.fitting.stroke.stroke_model`, and says how sure each
+point is, :func:`~scrapcut_cli.fitting.stroke.with_confidence`), cuts back what runs past that
+paint (:func:`~scrapcut_cli.fitting.trim_to_paint`) and makes the cutting path
 (:func:`~scrapcut_cli.toolpath.setpoints.make_cutting_path`) into a :class:`FitResult` that
 knows how to become a path file. Split in two so that one stitched recording serves several
 methods (a sweep in ``reproduce``) or several lines (``--pick all``) and an exploration replay
@@ -25,6 +27,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from scrapcut_cli.config import FitMethod, ScrapcutConfig, choice_names
@@ -37,6 +40,7 @@ from scrapcut_cli.toolpath.setpoints import check_toolpath_config, make_cutting_
 from scrapcut_cli.toolpath.speeds import SpeedTable, load_speed_table
 
 if TYPE_CHECKING:
+    from scrapcut_cli.fitting.stroke import StrokeObservations
     from scrapcut_cli.perception.candidates import LineSelection
     from scrapcut_cli.perception.paint import HsvRange
     from scrapcut_cli.perception.stitch import StitchResult
@@ -185,6 +189,7 @@ class FitResult:
             "unobserved": info.get("unobserved", 0),
             "unobserved_arcs": list(info.get("unobserved_arcs", [])),  # type: ignore[call-overload]
             "loop": info.get("loop"),
+            "confidence": confidence_summary(self.path),
             "fit_rms_m": rms,
             "fit_max_m": worst,
             "reverse_mean_m": reverse_mean,
@@ -344,6 +349,7 @@ def fit_stitched(
     """Fit the curve to the paint of the picked line ``line`` (of ``selection.lines``), cut
     back what runs past that paint, and make the cutting path on the stitched surface."""
     from scrapcut_cli.fitting import fit_line, trim_to_paint
+    from scrapcut_cli.fitting.stroke import stroke_model, with_confidence
 
     if method not in METHODS:
         raise ToolpathError(f"unknown fitting method {method!r}; known: {', '.join(METHODS)}")
@@ -356,10 +362,15 @@ def fit_stitched(
         selection = select_stitched(stitch, config)
     if not 0 <= line < len(selection.lines):
         raise ToolpathError(f"line {line} asked for, {len(selection.lines)} picked")
-    paint = stitch.all_paint_points[selection.lines[line].points]
-    curve = fit_line(paint, stitch.surface_points, method, config)
+    chosen = selection.lines[line].points
+    paint = stitch.all_paint_points[chosen]
+    observations = stroke_observations(stitch, config, chosen)
+    model = stroke_model(paint, observations) if len(observations.edges) else None
+    curve = fit_line(paint, stitch.surface_points, method, config, stroke=model)
     # No cut past the paint: an end may lie two stitching voxels from its nearest paint point.
     curve = trim_to_paint(curve, paint, tolerance_m=2.0 * config.stitch.voxel_size_m)
+    if not curve.closed:
+        curve = with_confidence(curve, paint, observations, model)
     t1 = time.perf_counter()
     # Paint lies on the surface too: both clouds give normals and both can hit the torch.
     surface = np.vstack([stitch.surface_points, stitch.paint_points])
@@ -388,6 +399,51 @@ def fit_stitched(
         selection=selection,
         line_index=line,
         paint_estimate=stitched.paint_estimate,
+    )
+
+
+def confidence_summary(path: CuttingPath) -> dict[str, Any] | None:
+    """The set-points' confidence in brief (None when the fit estimated none): σ's median and
+    max (metres), the mean support, the flag counts and the stretches of path bridged over a
+    gap as [start, end] arc lengths, metres."""
+    if path.sigma_m is None or path.support is None or len(path) == 0:
+        return None
+    bridged = np.array(["bridged_gap" in f for f in path.flags], dtype=bool)
+    edges = np.diff(np.concatenate([[0], bridged.astype(np.int8), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+    return {
+        "sigma_median_m": float(np.median(path.sigma_m)),
+        "sigma_max_m": float(np.max(path.sigma_m)),
+        "support_mean": float(np.mean(path.support)),
+        "bridged_gap": int(bridged.sum()),
+        "low_support": sum("low_support" in f for f in path.flags),
+        "bridged_stretches_m": [
+            [float(path.arc_length[a]), float(path.arc_length[b])]
+            for a, b in zip(starts, ends, strict=True)
+        ],
+    }
+
+
+def stroke_observations(
+    stitch: StitchResult, config: ScrapcutConfig, chosen: NDArray[np.intp] | None = None
+) -> StrokeObservations:
+    """What the stitched clouds say about the stroke besides its paint: its edges, the surface
+    around it and how many frames saw each voxel (``fitting.stroke``). ``chosen`` indexes the
+    line's points in ``stitch.all_paint_points`` (default: the paint points, in order)."""
+    from scrapcut_cli.fitting.stroke import StrokeObservations
+
+    frames, viewpoints = stitch.paint_frames, stitch.paint_viewpoints
+    if chosen is not None:
+        every_frames, every_viewpoints = stitch.all_paint_frames, stitch.all_paint_viewpoints
+        frames = every_frames[chosen] if len(every_frames) else every_frames
+        viewpoints = every_viewpoints[chosen] if len(every_viewpoints) else every_viewpoints
+    return StrokeObservations(
+        edges=stitch.edge_points,
+        surface=stitch.surface_points,
+        paint_frames=frames,
+        surface_frames=stitch.surface_frames,
+        voxel_m=config.stitch.voxel_size_m,
+        paint_viewpoints=viewpoints,
     )
 
 
