@@ -243,6 +243,16 @@ class PerceptionConfig:
         "m2",
         "0 is off; a blob of 1 dm^2 is a 25 mm stroke 400 mm long, not a speck",
     )
+    # A marking stroke is 2-5 cm wide: an image blob wider than this is something else of the
+    # paint's colour (a crate's face, a cone), kept apart from the frame's paint. 0: off.
+    max_stroke_width_m: float = rng(
+        0.08,
+        0.0,
+        1.0,
+        "m",
+        "0 is off; spray-can strokes are 2-5 cm wide, and a 1 m wide blob fills a wrist "
+        "camera's view",
+    )
 
 
 @dataclass(frozen=True)
@@ -292,6 +302,63 @@ class StitchConfig:
     )
     # share of the frame's points near the cloud needed to try ICP
     icp_min_overlap: float = rng(0.3, 0.0, 1.0, "", "a share of the frame's points")
+
+
+@dataclass(frozen=True)
+class SelectionConfig:
+    """Finding the marked line among the stitched paint's candidates (perception/candidates.py).
+
+    ``pick``: ``scan`` (the candidate the scan follows), ``longest``, ``nearest-start`` (nearest
+    to where the scan started) or ``all`` (one path per line-like candidate). Paint within
+    ``link_m`` is one candidate (45 mm bridges a 40 mm wire mesh's gaps); a stroke is at least
+    ``min_elongation`` times as long as wide and at most ``max_width_m`` wide; a candidate less
+    saturated than the line by ``dull_margin`` of its saturation is another paint (an old mark,
+    rust); paint farther than ``off_surface_m`` from every sight line (camera to view centre)
+    was never looked at;
+    duller paint within ``rim_m`` of the line is its own thin edge.
+    """
+
+    pick: str = "scan"
+    link_m: float = rng(
+        0.045,
+        0.001,
+        0.5,
+        "m",
+        "paint 1 mm apart is one piece; 0.5 m would join everything a wrist camera sees",
+    )
+    # grid of the shape analysis
+    cell_m: float = rng(
+        0.01, 0.001, 0.1, "m", "finer than 1 mm is below the stitching voxel; 0.1 m is 4 strokes"
+    )
+    # fewer paint voxels: a speck
+    min_points: int = rng(30, 1, 1_000_000, "", "a count of voxels")
+    min_elongation: float = rng(
+        3.0, 1.0, 100.0, "", "a stroke is longer than wide; 100 is a 2.5 m line of a 25 mm stroke"
+    )
+    # a stroke's width measured on the stitched paint (twice the 90 % quantile of the offsets)
+    max_width_m: float = rng(
+        0.08,
+        0.005,
+        1.0,
+        "m",
+        "spray-can strokes are 2-5 cm wide (with overspray and a wire mesh's two layers ~4 cm); "
+        "1 m is a wrist camera's whole view",
+    )
+    dull_margin: float = rng(
+        0.12,
+        0.0,
+        0.99,
+        "",
+        "a share of the line's saturation: 0 calls any duller voxel another paint",
+    )
+    # a sight line this close to a candidate: the scan looked at it
+    follow_m: float = rng(
+        0.05, 0.001, 1.0, "m", "closer than 1 mm is below the depth noise; 1 m is the whole view"
+    )
+    off_surface_m: float = rng(
+        0.1, 0.001, 10.0, "m", "closer than 1 mm is below the depth noise; 10 m is the cell"
+    )
+    rim_m: float = rng(0.003, 0.0, 0.05, "m", "0 is off; a 50 mm rim is twice a stroke's width")
 
 
 @dataclass(frozen=True)
@@ -888,6 +955,18 @@ class SimConfig:
     motion_frames_hz: float | None = rng(
         None, 0.0, 30.0, "Hz", "the D435i streams colour at 6, 15 or 30 Hz at 640 x 480"
     )
+    color_encoding: str = "rgb8"  # or "jpeg": CompressedImage on .../image_raw/compressed only
+    # image_transport's compressed default
+    jpeg_quality: int = rng(95, 1, 100, "", "libjpeg's quality scale")
+    storage: str = "sqlite3"  # a ROS 2 bag's storage (-o without .mcap): rosbag2's default
+    # What lies in the scene (sim.scene); None: the noise preset's.
+    paint_variation: bool | None = None  # the can's colour varies around the preset
+    # old marks near the line
+    faded_marks: int | None = rng(
+        None, 0, 20, "", "a piece marked for twenty earlier jobs has no room for a new line"
+    )
+    distractors: tuple[str, ...] | None = None  # box, cone, glove on the floor beside the piece
+    glints: bool | None = None  # mirror-like spots on the steel
 
 
 @dataclass(frozen=True)
@@ -1089,6 +1168,7 @@ class ScrapcutConfig:
     paint: PaintConfig = field(default_factory=PaintConfig)
     perception: PerceptionConfig = field(default_factory=PerceptionConfig)
     stitch: StitchConfig = field(default_factory=StitchConfig)
+    selection: SelectionConfig = field(default_factory=SelectionConfig)
     nurbs: NurbsConfig = field(default_factory=NurbsConfig)
     skeleton: SkeletonConfig = field(default_factory=SkeletonConfig)
     closure: ClosureConfig = field(default_factory=ClosureConfig)
@@ -1180,6 +1260,10 @@ def _coerce(value: Any, declared: str, key: str) -> Any:
         if not isinstance(value, str):
             raise ConfigError(f"{key} must be a string, got {value!r}")
         return value
+    if kind.startswith("tuple[str"):
+        if not isinstance(value, list | tuple) or any(not isinstance(v, str) for v in value):
+            raise ConfigError(f"{key} must be a list of names, got {value!r}")
+        return tuple(value)
     if kind.startswith("tuple"):
         if not isinstance(value, list | tuple):
             raise ConfigError(f"{key} must be a list of numbers, got {value!r}")

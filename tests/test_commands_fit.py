@@ -93,9 +93,19 @@ def test_fit_writes_the_path_file_and_every_export(
     assert set(summary["time_s"]) == {"read_stitch", "fit", "toolpath", "total"}
     csv_rows = (tmp_path / "out" / "path.csv").read_text().splitlines()
     assert csv_rows[0] == "# frame_id: panda_link0"
-    assert csv_rows[1] == "s,x,y,z,qx,qy,qz,qw,nx,ny,nz,speed_m_s,t_s,flags"
+    assert csv_rows[1] == (
+        "s,x,y,z,qx,qy,qz,qw,nx,ny,nz,speed_m_s,t_s,"
+        "support,frames,sigma_m,bridged_gap,low_support,flags"
+    )
     assert len(csv_rows) == len(path) + 2
     assert [r.rsplit(",", 1)[1] for r in csv_rows[2:]] == [";".join(f) for f in path.flags]
+    # Each set-point's confidence, in the file and the summary: a solid pipe, all painted.
+    assert path.sigma_m is not None and path.support is not None and path.frames is not None
+    assert np.all(path.sigma_m > 0.0) and np.median(path.sigma_m) < 0.002
+    assert np.median(path.support) > 0.7 and path.frames.max() >= 2
+    confidence = summary["confidence"]
+    assert confidence["bridged_gap"] == sum("bridged_gap" in f for f in path.flags)
+    assert confidence["sigma_median_m"] == pytest.approx(float(np.median(path.sigma_m)))
     # TUM as evo reads it: `t x y z qx qy qz qw`, comments skipped, time increasing.
     tum = np.loadtxt(tmp_path / "out" / "path.tum", comments="#")
     assert tum.shape == (len(path), 8)
@@ -360,12 +370,8 @@ def test_fit_every_simulated_piece(
     rec = sim_recordings[name]
     out = tmp_path / f"{name}_{method}.json"
     result = _run("fit", rec, "--method", method, "-o", out)
-    if name == "basket" and method == "skeleton":
-        # The paper's basket: paint only on the wires, the 5 mm skeleton falls apart.
-        line = _one_line_error(result)
-        assert "skeleton broken into" in line and "at leaf size 5 mm; try --leaf-size-mm" in line
-        assert not out.exists()
-        result = _run("fit", rec, "--method", method, "--leaf-size-mm", "20", "-o", out)
+    # (The paper's basket: paint only on the wires; its 5 mm skeleton fell apart. The stroke
+    # model's line keeps it one piece.)
     assert result.exit_code == 0, result.output
     mean, _ = _check_path_file(out, rec)
     # No open line is ever closed (issue 15).
@@ -487,3 +493,72 @@ def test_outputs_are_checked_like_good_tools_do(
     line = _one_line_error(_run("fit", rec, "-o", deep))
     assert line.endswith(f"folder {deep.parent} does not exist (create it, or add --parents)")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["new.csv", "path.json"]
+
+
+def _two_line_recording(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Two painted lines on the pipe (its top, and one 45 degrees round its side), the scan
+    following the first: six top views, as ``scene``."""
+    first = cylinder_top_line(length_m=0.3)
+    phi = np.radians(45.0)
+    x = np.linspace(-0.12, 0.12, 200)
+    y0, z0 = 0.5, 0.1
+    second = np.column_stack(
+        [x, np.full_like(x, y0 + 0.1 * np.sin(phi)), np.full_like(x, z0 + 0.1 * np.cos(phi))]
+    )
+    camera = small_camera(160, 120)
+    frames = []
+    for i, x_view in enumerate(np.linspace(-0.13, 0.13, 6)):
+        T = top_view(x_view, height_m=0.25)
+        a = render_cylinder(camera, T, first, index=i)
+        b = render_cylinder(camera, T, second, index=i)
+        paint_b = (b.color[:, :, 2] < 40) & (b.color[:, :, 0] > 80)  # orange: no blue
+        color = np.where(paint_b[:, :, None], b.color, a.color)
+        frames.append(type(a)(a.index, a.stamp_ns, color, a.depth, a.camera, a.T_base_cam))
+    write_scene_recording(path, frames, reference=first)
+    return first, second
+
+
+def test_two_lines_the_scan_one_is_cut_and_pick_all_cuts_both(tmp_path: Path) -> None:
+    rec = tmp_path / "two.mcap"
+    first, second = _two_line_recording(rec)
+    out = tmp_path / "cut.json"
+    # The pipe is narrow: the lines lie 15 mm apart, so link paint only that close.
+    config = tmp_path / "near.toml"
+    config.write_text("[selection]\nlink_m = 0.008\ncell_m = 0.004\n")
+    result = _run("fit", rec, "-o", out, "--json", "--config", config)
+    assert result.exit_code == 0, result.output
+    assert "line-like candidates of the paint" in result.stderr  # the warning
+    summary = json.loads(result.stdout)
+    curve, _, meta = read_path_file(out)
+    assert PolylineDistance(first).distance(curve.points).max() < 0.01
+    rejected = meta["selection"]["rejected"]
+    assert [c["kind"] for c in rejected if c["kind"] == "other_line"] == ["other_line"]
+    assert summary["selection"]["lines_found"] == 1
+    assert summary["reverse_max_m"] < 0.006  # the curve stays on its paint
+    assert meta["selection"]["paint"].startswith("orange")
+    both = _run(
+        "fit", rec, "-o", tmp_path / "all.json", "--pick", "all", "--json", "--config", config
+    )
+    assert both.exit_code == 0, both.output
+    document = json.loads(both.stdout)
+    assert document["schema"] == "scrapcut.fit/v1" and len(document["paths"]) == 2
+    second_curve, _, second_meta = read_path_file(tmp_path / "all_2.json")
+    assert second_meta["selection"]["line_index"] == 1
+    assert PolylineDistance(second).distance(second_curve.points).max() < 0.01
+
+
+def test_no_paint_metadata_means_paint_auto(tmp_path: Path) -> None:
+    reference = cylinder_top_line(length_m=0.3)
+    camera = small_camera(160, 120)
+    frames = [
+        render_cylinder(camera, top_view(x, height_m=0.25), reference, index=i)
+        for i, x in enumerate(np.linspace(-0.13, 0.13, 6))
+    ]
+    rec = tmp_path / "nameless.mcap"
+    write_scene_recording(rec, frames, paint=None, reference=reference)
+    result = _run("fit", rec, "-o", tmp_path / "p.json", "--json")
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.stdout)
+    assert summary["paint"].startswith("auto:") and "orange-like" in summary["paint"]
+    curve, _, _ = read_path_file(tmp_path / "p.json")
+    assert PolylineDistance(curve.points).distance(reference[5:-5]).mean() < 0.003

@@ -126,7 +126,40 @@ def test_usage_errors_exit_with_two(tmp_path: Path) -> None:
     assert CliRunner().invoke(cli, ["record"]).exit_code == 2  # no -o
     bad = CliRunner().invoke(cli, ["record", "--noise", "foggy", "-o", str(tmp_path / "x.mcap")])
     assert bad.exit_code == 2
-    # Always MCAP: a file named scan.bag would not open in any reader.
+    # MCAP or a ROS 2 bag folder: a file named scan.bag would not open in any reader.
     bag = CliRunner().invoke(cli, ["record", "--views", "1", "-o", str(tmp_path / "scan.bag")])
-    assert bag.exit_code == 2 and "name the file *.mcap" in bag.output
+    assert bag.exit_code == 2 and "convert` makes a ROS 1 bag" in bag.output
+    for option, value, message in (
+        ("--resolution", "1280by720", "expected WIDTHxHEIGHT"),
+        ("--distractors", "box,anvil", "unknown distractor 'anvil'"),
+    ):
+        result = CliRunner().invoke(cli, ["record", option, value, "-o", str(tmp_path / "a")])
+        assert result.exit_code == 2 and message in result.output
+    both = ["record", "--resolution", "64x36", "--width", "64", "-o", str(tmp_path / "a")]
+    assert CliRunner().invoke(cli, both).exit_code == 2
     assert list(tmp_path.iterdir()) == []
+
+
+def test_realsense_ros_defaults_jpeg_colour_in_a_ros2_sqlite3_bag(tmp_path: Path) -> None:
+    """--resolution, JPEG colour on .../compressed only, a ROS 2 bag with sqlite3 storage;
+    distractors and an old mark in the scene (and in the metadata)."""
+    out = tmp_path / "scan"
+    args = ["record", "--object", "planar_box", "--noise", "ideal", "--views", "1"]
+    args += ["--resolution", "64x36", "--color-encoding", "jpeg", "--jpeg-quality", "80"]
+    args += ["--distractors", "box", "--faded-marks", "1", "--glints", "-o", str(out)]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    assert any(p.suffix == ".db3" for p in out.iterdir())
+    with open_recording(out) as rec:
+        assert rec.format == "ros2"
+        names = {t.name for t in rec.topics()}
+        assert "/camera/camera/color/image_raw/compressed" in names
+        assert "/camera/camera/color/image_raw" not in names
+        assert (rec.camera.width, rec.camera.height) == (64, 36)
+        assert abs(rec.camera.fx - rec.camera.fy) < 0.5  # 16:9 pixels are square
+        params = json.loads(rec.metadata["scrapcut"]["params"])
+        scene = params["scene"]
+        assert [d["kind"] for d in scene["distractors"]] == ["box"]
+        assert len(scene["faded_marks"]) == 1 and scene["glints"] is True
+        assert params["sim"]["color_encoding"] == "jpeg"
+        assert rec.plan().usable == 1

@@ -199,3 +199,29 @@ def test_a_closed_100k_point_path_is_measured_in_bounded_memory() -> None:
     assert e.mean_m == pytest.approx(2 * MM, abs=1e-6)  # the arc is 2 mm away everywhere
     assert e.max_m == pytest.approx(2 * MM, abs=1e-6)
     assert e.reverse_max_m == pytest.approx(0.302, abs=1e-3)  # the diameter's middle
+
+
+def test_errors_against_sigma_and_its_calibration() -> None:
+    # A straight reference and a path 1 mm beside it on its first half, 3 mm on its second;
+    # the path claims σ = 1 mm on the first half (so 1 mm is within 2σ) and 1 mm on the second
+    # (3 mm is not): half the samples lie within 2σ.
+    x = np.linspace(0.0, 0.2, 201)
+    reference = np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])
+    offset = np.where(x < 0.1, 0.001, 0.003)
+    curve = np.column_stack([x, offset, np.zeros_like(x)])
+    error = path_error(curve, reference, sigma_m=np.full(len(x), 0.001))
+    assert error.sample_sigma_m is not None
+    assert error.within_2sigma == pytest.approx(0.5, abs=0.02)
+    figures = error.summary_mm()
+    assert figures["sigma_median_mm"] == pytest.approx(1.0)
+    assert figures["within_2sigma"] == pytest.approx(0.5, abs=0.02)
+    # σ growing along the curve is interpolated at each sample's nearest curve point.
+    grown = path_error(curve, reference, sigma_m=np.where(x < 0.1, 0.001, 0.002))
+    assert grown.within_2sigma == pytest.approx(1.0, abs=0.01)  # (the step itself)
+    # Without σ: no calibration figures.
+    plain = path_error(curve, reference)
+    assert plain.within_2sigma is None and plain.summary_mm()["sigma_median_mm"] is None
+    with pytest.raises(EvaluationError, match="sigma_m"):
+        path_error(curve, reference, sigma_m=np.full(5, 0.001))
+    with pytest.raises(EvaluationError, match="sigma_m"):
+        path_error(curve, reference, sigma_m=np.full(len(x), -0.001))

@@ -93,9 +93,14 @@ def test_an_image_all_in_the_paints_colour_is_no_stroke() -> None:
     tally.add(clouds, frame.color)
     with pytest.raises(PerceptionError, match=r"covers most of the image.*--paint or --hsv"):
         tally.raise_if_no_paint()
-    # 1.0 switches the check off: the frame is then stitched like any other.
+    # 1.0 switches the check off: the wall is then one blob far wider than a stroke, kept apart
+    # as other paint (reported, never cut) and named as such.
     everything = process_frame(frame, orange.hsv, PerceptionConfig(max_paint_share=1.0))
-    assert everything.skip_reason is None
+    assert everything.skip_reason == "paint_too_wide" and len(everything.paint_base) == 0
+    tally = PerceptionTally(orange.hsv)
+    tally.add(everything, frame.color)
+    with pytest.raises(PerceptionError, match=r"wider than a stroke"):
+        tally.raise_if_no_paint()
 
 
 def test_eval_refuses_a_path_in_another_frame_than_its_reference(tmp_path: Path) -> None:

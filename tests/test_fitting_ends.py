@@ -229,3 +229,38 @@ def test_bad_end_options_raise_one_line(fit, config, message):
     pts = painted_stroke(*line_on_plane(0.2), seed=1)
     with pytest.raises(FittingError, match=message.replace("(", r"\(")):
         fit(pts, config=config)
+
+
+# --------------------------------------------------------------------------- past the paint
+
+
+def test_what_runs_past_the_paint_is_cut_back_and_measured() -> None:
+    from scrapcut_cli.fitting import trim_to_paint
+    from scrapcut_cli.fitting.curve import Curve, NurbsModel
+    from scrapcut_cli.fitting.ends import past_paint
+
+    paint = painted_stroke(LINE, NORMALS, caps=True, seed=3)  # the line runs 0-0.5 m along x
+    # A curve 27 mm too long at the end (an extrapolated spline), straight on past the cap.
+    x = np.linspace(0.0, 0.527, 528)
+    long = np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])
+    check = past_paint(long, paint, tolerance_m=0.004)
+    assert check.trims[0] == pytest.approx(0.0)
+    # The cap reaches ~12.5 mm past 0.5 m: the curve may go as far as its rim, not further.
+    assert check.trims[1] == pytest.approx(0.527 - 0.5125 - 0.004, abs=0.003)
+    assert check.reverse_max_m <= 0.004 + 1e-9
+    # A clamped cubic through the same line, its domain cut back with it.
+    ctrl = np.column_stack([np.linspace(0.0, 0.527, 6), np.zeros(6), np.zeros(6)])
+    knots = np.array([0, 0, 0, 0, 1 / 3, 2 / 3, 1, 1, 1, 1], dtype=float)
+    curve = Curve(long, "nurbs", NurbsModel(3, knots, ctrl, np.ones(6)), 0.001)
+    trimmed = trim_to_paint(curve, paint, tolerance_m=0.004)
+    end = trimmed.points[-1, 0]
+    assert end == pytest.approx(0.527 - check.trims[1], abs=0.001)
+    assert trimmed.nurbs is not None
+    assert trimmed.nurbs.evaluate([1.0])[0, 0] == pytest.approx(end, abs=0.001)
+    assert trimmed.info["paint_trim_m"][1] == pytest.approx(check.trims[1])
+    assert trimmed.info["reverse_max_m"] <= 0.004 + 1e-9
+    # A curve within its paint is left alone (only measured).
+    inside = Curve(long[:480], "skeleton", None, 0.001)
+    same = trim_to_paint(inside, paint, tolerance_m=0.004)
+    assert np.array_equal(same.points, inside.points)
+    assert same.info["paint_trim_m"] == [0.0, 0.0]

@@ -39,9 +39,10 @@ from scrapcut_cli.perception.cloud import (
     process_frame,
     reject_isolated_pixels,
     reject_small_blobs,
+    split_wide_blobs,
     usable_depth_pixels,
 )
-from scrapcut_cli.perception.paint import PAINT_PRESETS
+from scrapcut_cli.perception.paint import PAINT_PRESETS, paint_mask, paint_pixel_indices
 from scrapcut_cli.recording.frame import CameraModel, Frame
 
 ORANGE = PAINT_PRESETS["orange"].hsv
@@ -206,9 +207,11 @@ def test_exact_frame_paint_lies_on_the_stroke_and_the_surface(
 def test_noisy_frame_rust_flying_pixels_and_holes_do_not_reach_the_cloud(
     noisy_frame: Frame, reference: np.ndarray
 ) -> None:
-    raw, _, _ = backproject_paint(
-        noisy_frame, ORANGE, replace(CONFIG, min_paint_neighbors=0, min_paint_area_m2=0.0)
+    filtered = paint_pixel_indices(noisy_frame.color, ORANGE)
+    usable = usable_depth_pixels(
+        noisy_frame.depth, filtered, min_depth_m=0.1, max_depth_m=2.0, flying_pixel_ratio=0.03
     )
+    raw = backproject_pixels(noisy_frame.camera, noisy_frame.depth, usable, noisy_frame.T_base_cam)
     d_raw = PolylineDistance(reference).distance(raw)
     assert np.mean(d_raw > HALF_WIDTH + 0.005) > 0.001  # rust does leak into the raw filter
     clouds = process_frame(noisy_frame, ORANGE, CONFIG)
@@ -359,3 +362,100 @@ def test_scattered_specks_are_told_apart_from_paint_without_depth(exact_frame: F
     everything = replace(CONFIG, min_paint_neighbors=0, min_paint_area_m2=0.0, sor_neighbors=0)
     kept = process_frame(specks, ORANGE, everything)
     assert kept.skip_reason is None and len(kept.paint_base) > 100
+
+
+def test_a_duller_cluster_and_wide_blobs_are_kept_apart_from_the_paint() -> None:
+    """Rust at iron-oxide saturation passes the orange range: the frame's saturation clusters
+    set it apart (other_base), and so does a crate face wider than any stroke."""
+    camera = small_camera()
+    reference = cylinder_top_line()
+    frame = render_cylinder(camera, top_view(0.0), reference, rust=False)
+    color = np.array(frame.color)
+    rng = np.random.default_rng(3)
+    paint = paint_mask(color, PAINT_PRESETS["orange"].hsv)
+    # Rust patches beside the stroke: orange-brown at S ~0.72, inside the orange range.
+    v, u = np.mgrid[0 : camera.height, 0 : camera.width]
+    patch = ((u - 40) ** 2 + (v - 30) ** 2 < 15**2) & ~paint
+    color[patch] = np.clip(np.array([150, 80, 42]) + rng.normal(0, 2, (patch.sum(), 3)), 0, 255)
+    assert paint_mask(color, PAINT_PRESETS["orange"].hsv)[patch].mean() > 0.9
+    rusty = Frame(frame.index, frame.stamp_ns, color, frame.depth, camera, frame.T_base_cam)
+    config = PerceptionConfig(min_paint_points=5, sor_neighbors=0)
+    clouds = process_frame(rusty, PAINT_PRESETS["orange"].hsv, config)
+    assert len(clouds.other_base) > 0
+    line = PolylineDistance(reference)
+    assert line.distance(clouds.paint_base).max() < 0.0125 + 0.003  # no rust in the paint
+    assert line.distance(clouds.other_base).min() > 0.012
+    assert clouds.paint_rgb.shape == (len(clouds.paint_base), 3)
+    # A plain stroke is one cluster: nothing apart.
+    plain = process_frame(frame, PAINT_PRESETS["orange"].hsv, config)
+    assert len(plain.other_base) == 0
+    # A blob 10 cm wide is no stroke at 80 mm; at 0 (off) it is paint.
+    mask = (u > 60) & (u < 150) & (v > 60)
+    pixels = np.flatnonzero(mask.ravel())
+    depth = np.full((camera.height, camera.width), 0.3, dtype=np.float32)  # 2.0 mm/px here
+    kept, wide = split_wide_blobs(pixels, depth, camera, max_width_m=0.08)
+    assert len(kept) == 0 and np.array_equal(wide, pixels)
+    kept, wide = split_wide_blobs(pixels, depth, camera, max_width_m=0.0)
+    assert np.array_equal(kept, pixels) and len(wide) == 0
+    band = np.flatnonzero(((np.abs(v - 60) < 6) & (u > 10)).ravel())  # 11 px: 22 mm wide
+    kept, wide = split_wide_blobs(band, depth, camera, max_width_m=0.08)
+    assert np.array_equal(kept, band) and len(wide) == 0
+
+
+# --------------------------------------------------------------------------- stroke edges
+
+
+def plate_with_slot(*, hole_depth: float | None) -> tuple[Frame, float, float]:
+    """A frame looking straight down (camera frame = base frame) at a plate 0.3 m away: a
+    horizontal 25 mm stroke, and a slot (columns 150-250) that takes the stroke's top side
+    from above it to 8 mm inside it. Through the slot the floor is ``hole_depth`` away (None:
+    no depth), with a flying pixel at its rim. Returns the frame and the stroke's top and
+    bottom edges' y, metres."""
+    camera = CameraModel(640, 480, 615.0, 615.0, 319.5, 239.5, frame_id="camera_optical")
+    z = 0.3
+    h, w = camera.height, camera.width
+    v, u = np.mgrid[0:h, 0:w]
+    y = (v - camera.cy) / camera.fy * z
+    top, bottom = -HALF_WIDTH, HALF_WIDTH
+    paint = (y >= top) & (y <= bottom)
+    slot = (u >= 150) & (u < 250) & (y >= top - 0.01) & (y < top + 0.008)
+    color = np.empty((h, w, 3), dtype=np.uint8)
+    color[:] = (118, 121, 127)
+    color[paint] = (255, 110, 0)
+    color[slot] = (70, 72, 70)
+    depth = np.full((h, w), z, dtype=np.float32)
+    depth[slot] = np.nan if hole_depth is None else hole_depth
+    if hole_depth is not None:
+        rim = slot & ~np.roll(slot, 1, axis=0)  # the slot's first row: a flying pixel
+        rim |= slot & ~np.roll(slot, -1, axis=0)
+        depth[rim] = 0.5 * (z + hole_depth)
+    frame = Frame(
+        index=0,
+        stamp_ns=1_000_000_000,
+        color=color,
+        depth=depth,
+        camera=camera,
+        T_base_cam=np.eye(4),
+    )
+    return frame, top, bottom
+
+
+@pytest.mark.parametrize("hole_depth", [None, 0.425])
+def test_stroke_edges_are_where_paint_meets_metal_not_a_hole(hole_depth: float | None) -> None:
+    frame, top, bottom = plate_with_slot(hole_depth=hole_depth)
+    clouds = process_frame(frame, ORANGE, CONFIG)
+    edges = clouds.edge_base
+    assert len(edges) > 100
+    x, y = edges[:, 0], edges[:, 1]
+    pixel = 0.3 / 615.0
+    over_slot = (x > (150 - 319.5) * pixel) & (x < (250 - 319.5) * pixel)
+    # Every edge lies on one of the stroke's two sides, within a pixel.
+    on_top = np.abs(y - top) < 1.5 * pixel
+    on_bottom = np.abs(y - bottom) < 1.5 * pixel
+    assert np.all(on_top | on_bottom)
+    # The bottom side is seen all along; the top side only beside the slot, never across it,
+    # and the paint's rim inside the slot (8 mm into the stroke) is no edge.
+    assert on_bottom[over_slot].sum() > 30 and on_top[~over_slot].sum() > 100
+    inner = (x > (155 - 319.5) * pixel) & (x < (245 - 319.5) * pixel)
+    assert not on_top[inner].any()
+    assert np.all(np.abs(edges[:, 2] - 0.3) < 0.001)

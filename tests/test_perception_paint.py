@@ -74,9 +74,10 @@ def test_no_preset_takes_steel_concrete_black_or_white(name: str) -> None:
     assert not paint_mask(image_of(neutral), PAINT_PRESETS[name].hsv).any()
 
 
-def test_orange_rejects_rust_by_saturation_although_the_hue_matches() -> None:
+def test_orange_rejects_dull_rust_by_saturation_although_the_hue_matches() -> None:
     orange = PAINT_PRESETS["orange"].hsv
-    # The simulator's rust range (hue 14-30 deg, S 0.30-0.50, V 0.22-0.52) and a harsher one.
+    # Dull rust (S <= 0.60) at every shade. Iron oxide can reach S ~0.75 and pass the range:
+    # the frame's saturation clusters tell it apart (tests/test_perception_cloud.py).
     rust = [
         colour_with_hsv(h, s, v)
         for h in (14.0, 22.0, 30.0)
@@ -199,13 +200,17 @@ def test_resolve_paint_preset_custom_and_unknown() -> None:
 def test_recording_paint_is_the_default_and_explicit_choices_win() -> None:
     meta = {"scrapcut": {"paint": "green", "object": "cylinder"}}
     assert resolve_recording_paint(PaintConfig(), meta) == PAINT_PRESETS["green"].hsv
-    assert resolve_recording_paint(PaintConfig(), {}) == PAINT_PRESETS["orange"].hsv
-    assert resolve_recording_paint(PaintConfig(), None) == PAINT_PRESETS["orange"].hsv
+    # No paint named by the user nor the recording: estimate it from the images (auto).
+    assert resolve_recording_paint(PaintConfig(), {}) is None
+    assert resolve_recording_paint(PaintConfig(), None) is None
+    assert resolve_recording_paint(PaintConfig(preset="auto"), meta) is None
     assert resolve_recording_paint(PaintConfig(preset="pink"), meta) == PAINT_PRESETS["pink"].hsv
     explicit = PaintConfig(preset="orange")  # the default's name, but chosen: it wins
     assert resolve_recording_paint(explicit, meta) == PAINT_PRESETS["orange"].hsv
     custom = resolve_recording_paint(PaintConfig(hsv=(1.0, 2.0, 0.5, 0.5)), meta)
-    assert custom.name == "custom"
+    assert custom is not None and custom.name == "custom"
+    with pytest.raises(PerceptionError, match="auto estimates the colour from a recording"):
+        resolve_paint(PaintConfig(preset="auto"))
 
 
 # --------------------------------------------------------------------------- dominant hues

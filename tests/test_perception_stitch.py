@@ -94,6 +94,26 @@ def test_stitching_the_same_frame_twice_adds_nothing(
         assert second.icp.reason == "no_improvement"
 
 
+def test_each_voxel_counts_the_frames_that_saw_it(sweep_clouds: list[FrameClouds]) -> None:
+    s = stitcher()
+    s.add(sweep_clouds[4])
+    assert np.all(s.paint_frames == 1) and len(s.paint_frames) == len(s.paint_points)
+    assert np.all(s.surface_frames == 1) and len(s.surface_frames) == len(s.surface_points)
+    assert len(s.edge_points) > 20 and np.all(s.edge_frames == 1)
+    s.add(sweep_clouds[4])
+    assert np.all(s.paint_frames == 2) and np.all(s.edge_frames == 2)
+    # A sweep: overlapping views see the middle of the stroke more often than its ends.
+    full = stitcher()
+    for c in sweep_clouds:
+        full.add(c)
+    frames = full.paint_frames
+    assert frames.min() >= 1 and frames.max() <= len(sweep_clouds)
+    x = full.paint_points[:, 0]
+    assert np.median(frames[np.abs(x) < 0.05]) > np.median(frames[np.abs(x) > 0.13])
+    kept = full.kept_clouds()
+    assert len(kept["edge_points"]) == len(kept["edge_frames"]) == len(full.edge_points)
+
+
 def test_size_counts_occupied_voxels_and_growth_is_its_increment(
     sweep_clouds: list[FrameClouds],
 ) -> None:

@@ -170,6 +170,41 @@ def test_runs_are_keyed_by_content_and_what_the_method_reads(
     assert not {r.key for r in other} & {r.key for r in runs}  # another reference: other runs
 
 
+# --------------------------------------------------------------------------- worker processes
+
+FAULT_PROBE = """
+import resource
+import numpy as np
+from scrapcut_cli.pipeline.engine import _Guarded
+
+def faults(rounds):
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    for _ in range(rounds):
+        block = np.ones(1 << 17)  # 1 MiB, as an image or a depth map
+        del block
+    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
+
+print(faults(100), _Guarded(faults, on_worker=True)(100))
+"""
+
+
+@pytest.mark.skipif(
+    not sys.platform.startswith("linux") or not os.confstr("CS_GNU_LIBC_VERSION"),
+    reason="glibc's allocator",
+)
+def test_tasks_on_a_worker_undo_the_nannys_malloc_setting() -> None:
+    """Dask's nanny starts workers with MALLOC_TRIM_THRESHOLD_=65536: every 1 MiB block is
+    then mapped afresh (a page fault per 4 KiB page). A task on a worker restores glibc's own
+    thresholds first, so a block is reused. In a child process: mallopt is process-wide."""
+    env = {**os.environ, "MALLOC_TRIM_THRESHOLD_": "65536"}
+    out = subprocess.run(
+        [sys.executable, "-c", FAULT_PROBE], env=env, capture_output=True, text=True, check=True
+    )
+    before, after = (int(n) for n in out.stdout.split())
+    assert before > 100 * 200  # ~256 faults per block
+    assert after < 100 * 20
+
+
 # --------------------------------------------------------------------------- a real cluster
 
 

@@ -14,6 +14,7 @@ from scrapcut_cli.config import ScrapcutConfig, load_config
 from scrapcut_cli.errors import ConfigError, PipelineError
 from scrapcut_cli.pipeline.engine import INLINE, Engine
 from scrapcut_cli.pipeline.reproduce import (
+    DEFAULT_OBJECTS,
     PAPER_OBJECTS,
     REAL_ROBOT_OBJECTS,
     config_to_toml,
@@ -26,8 +27,8 @@ from scrapcut_cli.pipeline.reproduce import (
 
 
 def test_objects_default_to_the_papers_five_and_all_adds_the_robot_shapes() -> None:
-    assert resolve_objects([]) == PAPER_OBJECTS
-    assert resolve_objects(["all"]) == PAPER_OBJECTS + REAL_ROBOT_OBJECTS
+    assert resolve_objects([]) == DEFAULT_OBJECTS == (*PAPER_OBJECTS, "perforated_plate")
+    assert resolve_objects(["all"]) == DEFAULT_OBJECTS + REAL_ROBOT_OBJECTS
     assert resolve_objects(["basket", "cylinder", "basket"]) == ("basket", "cylinder")
     with pytest.raises(PipelineError, match=r"unknown object 'teapot'; known: .*cylinder"):
         resolve_objects(["teapot"])

@@ -278,3 +278,55 @@ def test_bad_arguments_are_named(tmp_path: Path) -> None:
             writer.write_image("/s", 0, "cam", np.zeros((2, 2, 3), np.uint8))
         with pytest.raises(ValueError, match="strings to strings"):
             writer.add_metadata("bad", {"seed": 3})  # type: ignore[dict-item]
+
+
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
+def test_ros2_bag_writer_round_trip_with_metadata(tmp_path: Path, storage: str) -> None:
+    """A ROS 2 bag directory as ros2 bag record leaves it, read back by scrapcut's reader."""
+    from scrapcut_cli.recording.reader import open_recording
+    from scrapcut_cli.recording.writer import Ros2BagWriter, open_writer
+
+    rgb, depth_mm = _images()
+    bag = tmp_path / "scan"
+    T = make_transform(np.eye(3), [0.4, 0.0, 0.5])
+    with open_writer(bag, storage=storage) as writer:
+        assert isinstance(writer, Ros2BagWriter)
+        writer.add_metadata("scrapcut", {"paint": "green", "seed": "3"})
+        writer.write_tf(500, [("camera_link", "cam", np.eye(4))], static=True)
+        for stamp in (1_000, 40_000_000):
+            writer.write_tf(stamp, [("panda_link0", "camera_link", T)])
+            writer.write_camera_info("/camera/camera/color/camera_info", stamp, CAMERA)
+            writer.write_compressed_image(
+                "/camera/camera/color/image_raw/compressed", stamp, "cam", rgb, quality=95
+            )
+            writer.write_image(
+                "/camera/camera/aligned_depth_to_color/image_raw", stamp, "cam", depth_mm
+            )
+    assert (bag / "metadata.yaml").is_file()
+    suffix = ".db3" if storage == "sqlite3" else ".mcap"
+    assert [p.suffix for p in bag.iterdir() if p.name != "metadata.yaml"] == [suffix]
+    with open_recording(bag) as rec:
+        assert rec.format == "ros2"
+        assert rec.metadata["scrapcut"] == {"paint": "green", "seed": "3"}
+        frames = list(rec.frames())
+    assert len(frames) == 2
+    assert np.abs(frames[0].color.astype(int) - rgb).max() <= 12  # JPEG at quality 95
+    assert np.allclose(frames[0].depth[depth_mm > 0], depth_mm[depth_mm > 0] / 1000.0)
+
+
+def test_ros2_bag_writer_is_atomic_and_refuses_foreign_folders(tmp_path: Path) -> None:
+    from scrapcut_cli.recording.writer import Ros2BagWriter
+
+    bag = tmp_path / "scan"
+    with pytest.raises(RuntimeError), Ros2BagWriter(bag) as writer:
+        writer.write_string("/x", 1, "half")
+        raise RuntimeError("crash")
+    assert not bag.exists() and list(tmp_path.iterdir()) == []
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    (folder / "a.jpg").write_bytes(b"x")
+    with pytest.raises(ValueError, match="not a ROS 2 bag"):
+        Ros2BagWriter(folder)
+    assert (folder / "a.jpg").read_bytes() == b"x"
+    with pytest.raises(ValueError, match="unknown ROS 2 storage"):
+        Ros2BagWriter(tmp_path / "y", storage="parquet")

@@ -94,3 +94,32 @@ def test_merge_and_transform_keep_geometry() -> None:
     assert signed_volume(moved) == pytest.approx(2.0)
     assert np.allclose(moved.bounds[0], (4, 0, 0))
     assert np.array_equal(both.vertices, m.merge([a, b]).vertices)  # input untouched
+
+
+def test_perforated_sheet_is_closed_with_its_holes_cut_out() -> None:
+    holes = [
+        m.Hole((-0.02, -0.02), "rect", (0.014, 0.03)),
+        m.Hole((0.02, 0.02), "round", (0.024, 0.024)),
+    ]
+    sheet = m.perforated_sheet((0.08, 0.08), 0.04, holes, thickness=0.003)
+    outlines = [h.outline(0.001) for h in holes]
+    open_area = sum(m._polygon_area(o) for o in outlines)
+    assert open_area == pytest.approx(0.014 * 0.03 + np.pi * 0.012**2, rel=2e-3)
+    # Closed and outward: the signed volume is the solid's, holes taken out.
+    assert signed_volume(sheet) == pytest.approx((0.08**2 - open_area) * 0.003, rel=1e-9)
+    # Every edge is shared by exactly two triangles (no cracks, no T-junctions).
+    v = np.round(sheet.vertices / 1e-7).astype(np.int64)
+    _, ids = np.unique(v, axis=0, return_inverse=True)
+    f = ids.reshape(-1)[sheet.faces]
+    edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    assert set(counts.tolist()) == {2}
+
+
+def test_perforated_sheet_refuses_a_hole_that_leaves_its_cell() -> None:
+    with pytest.raises(ValueError, match="does not fit"):
+        m.perforated_sheet(
+            (0.08, 0.04), 0.04, [m.Hole((-0.02, 0.0), "round", (0.05, 0.05))], thickness=0.003
+        )
+    with pytest.raises(ValueError, match="divide"):
+        m.perforated_sheet((0.09, 0.04), 0.04, [], thickness=0.003)

@@ -20,11 +20,18 @@ NAMES = (
     "t_piece",
     "basket",
     "air_chamber",
+    "perforated_plate",
     "slanted",
     "planar_box",
     "pipe_ring",
     "plate_hole",
 )
+#: Where the line of a piece with holes was drawn: the envelope over the basket's wires, the
+#: perforated plate's top face (placed at its default spot).
+PAINTED = {
+    "basket": box((0.35, -0.2, 0.0), (0.65, 0.2, 0.15)),
+    "perforated_plate": box((0.28, -0.16, 0.122), (0.72, 0.16, 0.125)),
+}
 
 
 def distance_to_mesh(mesh: TriMesh, points: np.ndarray) -> np.ndarray:
@@ -71,8 +78,8 @@ def test_reference_is_ordered_on_the_surface_and_in_reach(name: str) -> None:
     assert 0.3 <= obj.reference_length_m <= 0.6
     steps = np.linalg.norm(np.diff(ref, axis=0), axis=1)
     assert steps.min() > 1e-7 and steps.max() < 0.0015
-    # On the painted surface (the basket's line is on the envelope over its wires).
-    surface = box((0.35, -0.2, 0.0), (0.65, 0.2, 0.15)) if name == "basket" else obj.mesh
+    # On the painted surface (the basket's and the plate's lines run over their holes).
+    surface = PAINTED.get(name, obj.mesh)
     assert distance_to_mesh(surface, ref).max() < 1e-6
     # Placed on the floor, in front of the robot, within the Panda's comfortable reach.
     lo, hi = obj.vertices.min(axis=0), obj.vertices.max(axis=0)
@@ -159,3 +166,20 @@ def test_placement_moves_piece_and_reference_rigidly() -> None:
     assert np.allclose(moved.reference, expected, atol=1e-12)
     assert moved.reference_length_m == pytest.approx(home.reference_length_m, rel=1e-12)
     assert np.allclose(moved.reference_normals, home.reference_normals @ R.T, atol=1e-6)
+
+
+def test_perforated_plate_line_crosses_slots_and_round_holes() -> None:
+    obj = make_object("perforated_plate")
+    ref = obj.reference
+    mesh = TriMesh(obj.vertices, obj.faces)
+    over_hole = distance_to_mesh(mesh, ref) > 1e-3
+    # Holes take a good part of the line's centre, in separate crossings, on both halves (slots
+    # on one side of the plain middle strip, round holes on the other); others take only a
+    # side of the stroke.
+    assert 0.08 <= over_hole.mean() <= 0.6
+    starts = np.flatnonzero(np.diff(over_hole.astype(int)) == 1)
+    assert len(starts) >= 3
+    x = ref[over_hole, 0] - 0.5
+    assert (x < -0.02).sum() > 20 and (x > 0.02).sum() > 20
+    # Through a hole the floor is 125 mm below: nothing of the plate under the line there.
+    assert distance_to_mesh(mesh, ref[over_hole] - [0.0, 0.0, 0.01]).min() > 1e-3

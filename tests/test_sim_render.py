@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 
 from scrapcut_cli.geometry import PolylineDistance, look_at, transform_points
-from scrapcut_cli.perception.paint import PAINT_PRESETS, paint_mask
+from scrapcut_cli.perception.paint import PAINT_PRESETS, paint_mask, rgb_to_hsv_deg
 from scrapcut_cli.sim import make_object
 from scrapcut_cli.sim.camera import Lighting, d435i_color_camera
-from scrapcut_cli.sim.render import FLOOR, MISS, OBJECT, SceneRenderer
+from scrapcut_cli.sim.render import DISTRACTOR, FLOOR, MISS, OBJECT, SceneRenderer
 from scrapcut_cli.sim.surface import OVERSPRAY_PRESETS, PaintStroke
 
 CAMERA = d435i_color_camera(320, 240)
@@ -59,7 +59,7 @@ def test_paint_lies_on_the_stroke_and_fills_it() -> None:
     assert (view.paint == view.stroke).all()  # no overspray asked for
 
 
-def test_paint_passes_the_orange_filter_and_rust_does_not() -> None:
+def test_paint_passes_the_orange_filter_and_rust_only_partly_and_duller() -> None:
     r = renderer("air_chamber", overspray="light")
     ref = r.object.reference
     view = r.render(above(ref[len(ref) // 3], 0.3, 0.05), CAMERA)
@@ -67,8 +67,44 @@ def test_paint_passes_the_orange_filter_and_rust_does_not() -> None:
     mask = paint_mask(rgb, PAINT_PRESETS["orange"].hsv)
     assert view.rust.sum() > 1000
     assert mask[view.paint].mean() > 0.99
-    assert mask[view.rust].mean() < 0.01
+    # Iron oxide is as saturated as the filter's bound in places: perception must tell it
+    # apart from the paint by more than a threshold (its colour cluster, its shape).
+    assert 0.05 < mask[view.rust].mean() < 0.6
+    sat = rgb_to_hsv_deg(rgb.reshape(-1, 3))[:, 1].reshape(rgb.shape[:2])
+    assert np.quantile(sat[view.rust & mask], 0.99) < np.quantile(sat[view.stroke], 0.05)
     assert not mask[view.geometry == FLOOR].any()
+
+
+def test_a_yard_scene_renders_old_marks_distractors_and_glints() -> None:
+    from scrapcut_cli.config import SimConfig
+    from scrapcut_cli.sim.camera import noise_preset
+    from scrapcut_cli.sim.recorder import make_scene, place_object
+
+    config = SimConfig(object="planar_box", noise="yard", seed=1)
+    obj = place_object(config)
+    scene = make_scene(config, obj, noise_preset("yard"))
+    assert [d.kind for d in scene.distractors] == ["box", "cone", "glove"]
+    assert len(scene.faded) == 1 and scene.faded[0].crosses
+    stroke = PaintStroke(obj.reference, width_m=0.025, rgb=scene.can_rgb, seed=1)
+    r = SceneRenderer(
+        obj,
+        stroke,
+        faded=[m.stroke for m in scene.faded],
+        distractors=scene.distractors,
+        glints=True,
+        seed=1,
+    )
+    ref = r.object.reference
+    view = r.render(look_at(ref[60] + np.array([-0.1, 0.0, 0.45]), ref[60]), CAMERA)
+    assert view.faded.sum() > 100 and not (view.faded & view.paint).any()
+    assert (view.geometry >= DISTRACTOR).sum() > 1000
+    assert (view.glare > 0.5).sum() > 5
+    # Distractors are lit plastic of the paint's colour: the orange filter takes them.
+    rgb = np.clip(np.rint(view.color * 255), 0, 255).astype(np.uint8)
+    mask = paint_mask(rgb, PAINT_PRESETS["orange"].hsv)
+    assert mask[view.geometry >= DISTRACTOR].mean() > 0.9
+    # Glints are white: never paint.
+    assert not mask[view.glare > 0.5].any()
 
 
 def test_wire_basket_paint_has_gaps_a_box_does_not() -> None:

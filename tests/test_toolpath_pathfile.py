@@ -195,7 +195,7 @@ def test_csv_export(tmp_path: Path) -> None:
     with target.open(newline="") as fh:
         assert fh.readline() == "# frame_id: panda_link0\n"
         rows = list(csv.reader(fh))
-    assert tuple(rows[0]) == CSV_COLUMNS
+    assert tuple(rows[0]) == (*CSV_COLUMNS, "flags")
     assert ",".join(rows[0]) == "s,x,y,z,qx,qy,qz,qw,nx,ny,nz,speed_m_s,t_s,flags"  # docs/
     assert [r[13] for r in rows[1:]] == [";".join(f) for f in path.flags]
     values = np.array([r[:13] for r in rows[1:]], dtype=float)
@@ -206,3 +206,73 @@ def test_csv_export(tmp_path: Path) -> None:
     np.testing.assert_array_equal(values[:, 8:11], path.normals)
     np.testing.assert_array_equal(values[:, 11], path.speed)
     np.testing.assert_array_equal(values[:, 12], path.time)
+
+
+def _with_confidence() -> tuple[Curve, CuttingPath]:
+    """The example curve with a confidence: a 'hole' over its second quarter."""
+    from dataclasses import replace
+
+    from scrapcut_cli.fitting.curve import CurveConfidence
+
+    curve, _ = _example()
+    n = len(curve.points)
+    hole = (np.arange(n) >= n // 4) & (np.arange(n) < n // 2)
+    confidence = CurveConfidence(
+        support=np.where(hole, 0.1, 0.9),
+        frames=np.where(hole, 0, 4).astype(np.int64),
+        sigma_m=np.where(hole, 0.002, 0.0005) + 1e-6 * np.arange(n),
+        bridged_gap=hole,
+        low_support=hole,
+    )
+    curve = replace(curve, confidence=confidence)
+    surface, viewpoints = cylinder_surface(0.08, angle=np.pi / 2, seed=0)
+    return curve, make_cutting_path(curve, surface, viewpoints, config=ToolpathConfig())
+
+
+def test_confidence_reaches_set_points_file_and_csv(tmp_path: Path) -> None:
+    curve, path = _with_confidence()
+    assert path.sigma_m is not None and path.support is not None and path.frames is not None
+    # Set-points take the confidence of the curve where they sit.
+    s = np.linspace(0.0, 1.0, len(path)) * path.arc_length[-1] / curve.length
+    hole = (s > 0.27) & (s < 0.48)
+    solid = (s < 0.22) | (s > 0.53)
+    flags = np.array(["bridged_gap" in f for f in path.flags])
+    low = np.array(["low_support" in f for f in path.flags])
+    assert flags[hole].all() and not flags[solid].any() and np.array_equal(flags, low)
+    assert np.all(path.sigma_m[hole] > 0.0019) and np.all(path.sigma_m[solid] < 0.0008)
+    assert np.all(path.frames[hole] == 0) and np.all(path.frames[solid] == 4)
+    assert path.info["bridged_gap"] == int(flags.sum())
+    data = path_to_dict(
+        curve, path, source=SOURCE, method_params={}, config={}, frame_id="panda_link0",
+        created="2024-01-01T00:00:00+00:00",
+    )  # fmt: skip
+    sp = data["path"]["setpoints"][0]
+    assert {"support", "frames", "sigma_m"} <= set(sp) and isinstance(sp["frames"], int)
+    write_path_file(tmp_path / "p.json", data)
+    _, back, _ = read_path_file(tmp_path / "p.json")
+    assert back.sigma_m is not None and back.frames is not None and back.support is not None
+    np.testing.assert_array_equal(back.sigma_m, path.sigma_m)
+    np.testing.assert_array_equal(back.frames, path.frames)
+    np.testing.assert_array_equal(back.support, path.support)
+    assert back.flags == path.flags
+    target = tmp_path / "path.csv"
+    write_path_csv(path, target)
+    values = np.genfromtxt(target, delimiter=",", comments="#", skip_header=2)[:, :-1]
+    with target.open(newline="") as fh:
+        rows = list(csv.reader(fh))[1:]
+    assert rows[0][-6:] == ["support", "frames", "sigma_m", "bridged_gap", "low_support", "flags"]
+    assert [r[-1] for r in rows[1:]] == [";".join(f) for f in path.flags]
+    np.testing.assert_array_equal(values[:, 15], path.sigma_m)
+    np.testing.assert_array_equal(values[:, 16].astype(bool), flags)
+
+
+def test_a_file_without_confidence_reads_without_it_and_bad_sigma_is_refused() -> None:
+    data = _dict()
+    _, path, _ = path_from_dict(data)
+    assert path.sigma_m is None and path.support is None and path.frames is None
+    curve, with_conf = _with_confidence()
+    data = path_to_dict(curve, with_conf, source=SOURCE, method_params={}, config={},
+                        frame_id="panda_link0")  # fmt: skip
+    data["path"]["setpoints"][2]["sigma_m"] = -0.001
+    with pytest.raises(ToolpathError, match="sigma_m"):
+        path_from_dict(data)

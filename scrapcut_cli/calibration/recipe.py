@@ -95,7 +95,7 @@ def calibrate_recording(
     ScrapcutError
         RecordingError (unreadable, no TF chain), CalibrationError (too few overlapping frames).
     """
-    from scrapcut_cli.perception.paint import resolve_recording_paint
+    from scrapcut_cli.pipeline.fit import paint_for_recording
     from scrapcut_cli.recording.reader import open_recording
 
     t0 = time.perf_counter()
@@ -110,7 +110,7 @@ def calibrate_recording(
                 "with each other"
             )
         published = rec.published_mount()
-        hsv = resolve_recording_paint(config.paint, rec.metadata)
+        hsv, _ = paint_for_recording(rec, config)  # --paint auto: estimated from the images
         velocities = _velocities(rec.moving_poses, plan.stamps_ns)
         chosen = choose_frames(plan.T_base_cam, velocities, cal.max_frames)
         # An exploration with calibration views: also solve without them, to say what they gave.

@@ -194,8 +194,8 @@ def paint_options(f: F) -> F:
         "--paint",
         default=None,
         metavar="PRESET",
-        help="Paint colour preset: orange, pink, yellow, green, blue "
-        "(default: the recording's own, else orange).",
+        help="Paint colour preset: orange, pink, yellow, green, blue, or auto: estimated from "
+        "the recording's images (default: the recording's own, else auto).",
     )(f)
     return f
 
@@ -347,6 +347,16 @@ _STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
         config_type("perception.min_paint_area_m2", 1e-6),
         "Drop paint blobs covering less surface than this, e.g. overspray specks [mm²] "
         "(default 25; 0: off).",
+    ),
+    (
+        "--max-stroke-width-mm",
+        "max_stroke_width_mm",
+        "perception",
+        "max_stroke_width_m",
+        1e-3,
+        config_type("perception.max_stroke_width_m", 1e-3),
+        "Image blobs of paint wider than this are no stroke (a crate, a cone) [mm] "
+        "(default 80; 0: off).",
     ),
     (
         "--min-paint-points",

@@ -155,6 +155,14 @@ def _sink(
     hidden=True,
     help="Deprecated spelling of --with-surface (`--surface FILE` names a file elsewhere).",
 )
+@click.option(
+    "--overlay",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Folder of per-frame PNGs (frame_000012.png): the image with the paint mask (kept "
+    "green, dropped yellow), the stitched line (cyan) and rejected candidates (red, labelled), "
+    "next to a hue-saturation histogram of paint vs background with the filter's range.",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 @calibration_option
 @config_option
@@ -166,6 +174,7 @@ def filter_cmd(
     output: Path | None,
     with_surface: bool,
     old_surface: bool,
+    overlay: Path | None,
     as_json: bool,
     calibration_path: Path | None,
     config_path: Path | None,
@@ -184,11 +193,15 @@ def filter_cmd(
         deprecated("--surface", "--with-surface")
         with_surface = True
     from scrapcut_cli.perception.cloud import PerceptionTally, process_frame
-    from scrapcut_cli.perception.paint import PAINT_PRESETS, resolve_recording_paint
+    from scrapcut_cli.perception.paint import PAINT_PRESETS
+    from scrapcut_cli.perception.stitch import Stitcher
+    from scrapcut_cli.pipeline.fit import paint_for_recording
     from scrapcut_cli.recording.reader import open_recording
 
     if output is not None:
         _check_output(output, recording)
+    if overlay is not None:
+        _check_overlay(overlay, recording)
     stage, shared = split_stage_options(options)
     config = apply_stage_options(build_config(config_path, **shared), stage)
     config = apply_calibration_options(config, calibration_path)
@@ -196,8 +209,10 @@ def filter_cmd(
 
     with open_recording(recording, config.recording, mount=mount) as rec:
         plan = rec.plan()
-        hsv = resolve_recording_paint(config.paint, rec.metadata)
-        preset = PAINT_PRESETS.get(hsv.name)
+        hsv, estimate = paint_for_recording(rec, config)
+        if estimate is not None:
+            err.print(f"paint {estimate.describe()}", soft_wrap=True, markup=False)
+        preset = PAINT_PRESETS.get(estimate.preset if estimate is not None else hsv.name)
         meta = {
             "kind": "paint_clouds",
             "source": str(recording),
@@ -207,6 +222,8 @@ def filter_cmd(
         if calibration_path is not None:
             meta["calibration"] = str(calibration_path)
         tally = PerceptionTally(hsv)
+        stitcher = Stitcher(config.stitch, perception=config.perception) if overlay else None
+        centres = []
         with (
             _sink(
                 output,
@@ -223,8 +240,14 @@ def filter_cmd(
                 tally.add(clouds, frame.color)
                 if sink is not None:
                     sink.add(clouds)
+                if stitcher is not None:
+                    stitcher.add(clouds)
+                    if clouds.view_centre is not None:
+                        centres.append([clouds.T_base_cam[:3, 3], clouds.view_centre])
                 bar.update(task, advance=1, status=f"{tally.paint_points:,} points")
             tally.raise_if_no_paint()  # before the output is committed
+        if overlay is not None and stitcher is not None:
+            _write_overlays(rec, overlay, hsv, config, stitcher, centres)
 
     summary = {
         "recording": str(recording),
@@ -241,6 +264,70 @@ def filter_cmd(
     _render(tally, plan)
     if output is not None:
         err.print(f"wrote {output}")
+    if overlay is not None:
+        err.print(f"wrote {plan.usable} overlay PNGs to {overlay}")
+
+
+#: The files an overlay folder written by ``scrapcut filter`` holds.
+_PNG_NAME = re.compile(r"frame_\d{6}\.png")
+
+
+def _check_overlay(folder: Path, recording: Path) -> None:
+    """A usage error unless ``--overlay`` names a folder that may be (re)placed whole."""
+    if folder.exists() and folder.resolve() == recording.resolve():
+        raise click.BadParameter(f"{folder} is the recording itself", param_hint="--overlay")
+    if not folder.exists():
+        return
+    if not folder.is_dir():
+        raise click.BadParameter(f"{folder} exists and is not a folder", param_hint="--overlay")
+    target = folder.resolve()
+    if target == Path.cwd().resolve() or target in Path.cwd().resolve().parents:
+        raise click.BadParameter(f"{folder} holds the current folder", param_hint="--overlay")
+    foreign = sorted(p.name for p in folder.iterdir() if not _PNG_NAME.fullmatch(p.name))
+    if foreign:
+        raise click.BadParameter(
+            f"{folder} holds files scrapcut filter did not write (e.g. {foreign[0]}) and would "
+            "be replaced as a whole; give a new folder",
+            param_hint="--overlay",
+        )
+
+
+def _write_overlays(
+    rec: Any, folder: Path, hsv: Any, config: Any, stitcher: Any, centres: list[Any]
+) -> None:
+    """Second pass over the frames: one PNG each with the mask and the candidates."""
+    import numpy as np
+    from PIL import Image
+
+    from scrapcut_cli._io import atomic_path
+    from scrapcut_cli.commands._console import err, progress
+    from scrapcut_cli.errors import PerceptionError
+    from scrapcut_cli.perception.candidates import select_line
+    from scrapcut_cli.perception.overlay import Marked, overlay_image
+
+    points = np.vstack([stitcher.paint_points, stitcher.other_points])
+    marked: list[Marked] = []
+    try:
+        selection = select_line(
+            points,
+            np.vstack([stitcher.paint_rgb, stitcher.other_rgb]),
+            np.asarray(centres).reshape(-1, 2, 3),
+            voxel_m=config.stitch.voxel_size_m,
+            config=config.selection,
+        )
+    except PerceptionError as exc:
+        err.print(f"[yellow]note:[/] no line picked for the overlay ({exc})", soft_wrap=True)
+    else:
+        marked = [Marked(points[c.points], "line", line=True) for c in selection.lines]
+        marked += [
+            Marked(points[c.points], c.kind) for c in selection.rejected if c.kind != "speck"
+        ]
+    with atomic_path(folder, directory=True) as tmp, progress("frames") as bar:
+        task = bar.add_task("overlays", total=rec.plan().usable, status="")
+        for frame in rec.frames():
+            picture = overlay_image(frame, hsv, config.perception, marked)
+            Image.fromarray(picture).save(tmp / f"frame_{frame.index:06d}.png")
+            bar.update(task, advance=1)
 
 
 def _render(tally: PerceptionTally, plan: FramePlan) -> None:

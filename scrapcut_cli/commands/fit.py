@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -81,6 +82,14 @@ METHODS = choice_names(FitMethod)
     "--no-eval",
     is_flag=True,
     help="Do not measure the path against a reference (no PATH.error.json).",
+)
+@click.option(
+    "--pick",
+    type=click.Choice(("scan", "longest", "nearest-start", "all")),
+    default=None,
+    help="Which line-like paint to cut when there are several: the one the scan follows "
+    "(default), the longest, the one nearest to where the scan started, or all (one path "
+    "file each: PATH.json, PATH_2.json, ...).",
 )
 @click.option(
     "--leaf-size-mm",
@@ -215,6 +224,7 @@ def fit(
     as_json: bool,
     reference: Path | None,
     no_eval: bool,
+    pick: str | None,
     leaf_size_mm: float | None,
     old_leaf_size_mm: float | None,
     smoothness: float | None,
@@ -243,17 +253,21 @@ def fit(
     """Fit the painted line of RECORDING and write the cutting path.
 
     Reads the recording (MCAP, ROS 1 bag or ROS 2 bag directory), stitches the paint seen in
-    every frame, fits a NURBS or a 3-D skeleton, and places torch set-points perpendicular to
-    the observed surface at the standoff, tilted where the torch would hit the piece, timed by
-    the material's cutting speed. A line that closes on itself (a ring round a pipe, a
-    cut-out) is fitted as a loop and cut from a pierce with a lead-in, once round and past
-    its start; an arc of it no camera saw is bridged by the fit, its set-points flagged
-    unobserved and the arc reported.
+    every frame, finds the marked line among the paint's candidates (crates, cones, old faded
+    marks and rust are rejected and listed), fits a NURBS or a 3-D skeleton to it, cuts back
+    whatever runs past its paint, and places torch set-points perpendicular to the observed
+    surface at the standoff, tilted where the torch would hit the piece, timed by the
+    material's cutting speed. A line that closes on itself (a ring round a pipe, a cut-out) is
+    fitted as a loop and cut from a pierce with a lead-in, once round and past its start; an
+    arc of it no camera saw is bridged by the fit, its set-points flagged unobserved and the
+    arc reported.
 
     When a reference is at hand (the recording's /scrapcut/reference, or --reference), the
     path is measured against it as `scrapcut eval` does, and PATH.error.json and PATH.error.md
     are written beside the path file.
     """
+    from rich.markup import escape
+
     from scrapcut_cli.commands._console import deprecated, err, progress
     from scrapcut_cli.pipeline.evaluate import error_report_paths
     from scrapcut_cli.pipeline.job import Job, Pipeline
@@ -290,6 +304,7 @@ def fit(
         leaf_size_mm = old_leaf_size_mm
     stage, shared = split_stage_options(shared)
     config = apply_stage_options(build_config(config_path, **shared), stage)
+    config = config.override("selection", pick=pick)
     config = config.override("skeleton", leaf_size_m=mm_to_m(leaf_size_mm))
     config = config.override(
         "nurbs", smoothness=smoothness, control_points=control_points, degree=degree
@@ -337,23 +352,45 @@ def fit(
         def advance(done: int, total: int) -> None:
             bar.update(task, completed=done, total=total)
 
-        result = Pipeline(job, progress=advance).run()
-
-    summary = result.summary()
+        pipeline = Pipeline(job, progress=advance)
+        results = [pipeline.run()]
+    selection = None if pipeline.stitched is None else pipeline.stitched.selection
+    for warning in () if selection is None else selection.warnings:
+        err.print(f"[yellow]warning:[/] {escape(warning)}", soft_wrap=True)
+    # --pick all: one more job per further line, on the same stitched clouds.
+    for line in range(1, 0 if selection is None else len(selection.lines)):
+        more = replace(
+            job,
+            line=line,
+            output=output.with_name(f"{output.stem}_{line + 1}.json"),
+            nurbs_json=None,
+        )
+        results.append(Pipeline(more, stitched=pipeline.stitched, speeds=pipeline.speeds).run())
+    summaries = [result.summary() for result in results]
     if as_json:
         from scrapcut_cli.commands._console import json_document
 
-        click.echo(json_document("scrapcut.fit/v1", summary))
+        # One path: its summary; several (--pick all): {"paths": [one summary per path]}.
+        data = summaries[0] if len(summaries) == 1 else {"paths": summaries}
+        click.echo(json_document("scrapcut.fit/v1", data))
     else:
-        _render(summary)
-    if summary["flagged"]:
-        err.print(
-            f"[yellow]note:[/] {summary['flagged']} set-point(s) flagged "
-            f"(tilted {summary['tilted']}, collision {summary['collision']}, "
-            f"no surface {summary['no_surface']}"
-            + (f", unobserved {summary['unobserved']}" if summary["closed"] else "")
-            + f"); see 'flags' in {output}"
-        )
+        for summary in summaries:
+            _render(summary)
+    for summary in summaries:
+        if summary["flagged"]:
+            err.print(
+                f"[yellow]note:[/] {summary['flagged']} set-point(s) flagged "
+                f"(tilted {summary['tilted']}, collision {summary['collision']}, "
+                f"no surface {summary['no_surface']}"
+                + (f", unobserved {summary['unobserved']}" if summary["closed"] else "")
+                + (
+                    f", bridged gap {confidence['bridged_gap']}, low support "
+                    f"{confidence['low_support']}"
+                    if (confidence := summary.get("confidence"))
+                    else ""
+                )
+                + f"); see 'flags' in {summary['outputs'][0]}"
+            )
 
 
 def _render(summary: dict[str, Any]) -> None:
@@ -388,9 +425,16 @@ def _render(summary: dict[str, Any]) -> None:
         (
             "paint spread",
             f"{1000 * summary['paint_spread_rms_m']:.2f} mm RMS, "
-            f"{1000 * summary['paint_spread_max_m']:.2f} mm max around the curve (the painted "
-            "band's width and noise; not an accuracy: see error vs reference)",
+            f"{1000 * summary['paint_spread_max_m']:.2f} mm max around the curve (the line's "
+            "painted band's width and noise; not an accuracy: see error vs reference)",
         ),
+        (
+            "reverse distance",
+            f"{1000 * summary['reverse_mean_m']:.2f} mm mean, "
+            f"{1000 * summary['reverse_max_m']:.2f} mm max (curve to the line's paint)"
+            + _trimmed(summary["paint_trim_m"]),
+        ),
+        ("line", _line_text(summary.get("selection"))),
         ("set-points", str(summary["setpoints"])),
         (
             "flagged",
@@ -399,6 +443,19 @@ def _render(summary: dict[str, Any]) -> None:
             + (f", unobserved {summary['unobserved']})" if summary["closed"] else ")"),
         ),
         *_loop_rows(summary),
+        *(
+            [
+                (
+                    "confidence",
+                    f"σ {1000 * confidence['sigma_median_m']:.2f} mm median, "
+                    f"{1000 * confidence['sigma_max_m']:.2f} mm max; "
+                    f"{confidence['bridged_gap']} set-point(s) bridge a gap, "
+                    f"{confidence['low_support']} low support",
+                )
+            ]
+            if (confidence := summary.get("confidence"))
+            else []
+        ),
         (
             "cutting",
             f"{summary['material']} {summary['thickness_mm']:g} mm: "
@@ -456,3 +513,53 @@ def _loop_rows(summary: dict[str, Any]) -> list[tuple[str, str]]:
     )
     rows.append(("unobserved arcs", text))
     return rows
+    selection = summary.get("selection") or {}
+    if selection.get("rejected"):
+        _render_rejected(selection["rejected"])
+
+
+def _trimmed(trims: list[float]) -> str:
+    if not any(t > 0 for t in trims):
+        return ""
+    return f"; cut back {1000 * trims[0]:.1f} / {1000 * trims[1]:.1f} mm that ran past the paint"
+
+
+def _line_text(selection: dict[str, Any] | None) -> str:
+    if not selection:
+        return "all stitched paint"
+    line = selection["lines"][selection["line_index"]]
+    counts: dict[str, int] = {}
+    for c in selection["rejected"]:
+        counts[c["kind"]] = counts.get(c["kind"], 0) + 1
+    rejected = ", ".join(f"{n} {k}" for k, n in counts.items()) or "nothing"
+    which = (
+        f"line {selection['line_index'] + 1} of {selection['lines_found']}, "
+        if selection["lines_found"] > 1
+        else ""
+    )
+    return (
+        f"{which}{line['points']} voxels, {line['length_mm']:.0f} mm, scan follows "
+        f"{100 * line['follow']:.0f} %; rejected: {rejected}"
+    )
+
+
+def _render_rejected(rejected: list[dict[str, Any]]) -> None:
+    from rich.table import Table
+
+    from scrapcut_cli.commands._console import out
+
+    table = Table(title="paint that is not the line", title_justify="left")
+    for name in ("kind", "voxels", "size [mm]", "at (x, y, z) [m]", "S / V", "why"):
+        table.add_column(name)
+    for c in rejected:
+        x, y, z = c["position_m"]
+        sv = f"{c['saturation']:.2f} / {c['value']:.2f}" if c["saturation"] is not None else "-"
+        table.add_row(
+            c["kind"],
+            str(c["points"]),
+            f"{c['length_mm']:.0f} x {c['width_mm']:.0f}",
+            f"{x:.3f}, {y:.3f}, {z:.3f}",
+            sv,
+            c["reason"],
+        )
+    out.print(table)

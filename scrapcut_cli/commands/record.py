@@ -60,6 +60,54 @@ METHODS = choice_names(FitMethod)
     "--height", type=config_type("sim.height"), default=None, help="Image height [px] (480)."
 )
 @click.option(
+    "--resolution",
+    default=None,
+    metavar="WxH",
+    help="Image size, e.g. 1280x720 (realsense-ros 4.x's default); instead of --width/--height.",
+)
+@click.option(
+    "--color-encoding",
+    type=click.Choice(("rgb8", "jpeg")),
+    default=None,
+    help="Colour as raw rgb8 images, or JPEG-compressed only on "
+    ".../color/image_raw/compressed as image_transport publishes it (default rgb8).",
+)
+@click.option(
+    "--jpeg-quality",
+    type=config_type("sim.jpeg_quality"),
+    default=None,
+    help="JPEG quality with --color-encoding jpeg (default 95, image_transport's).",
+)
+@click.option(
+    "--storage",
+    type=click.Choice(("sqlite3", "mcap")),
+    default=None,
+    help="Storage of a ROS 2 bag output (-o DIR) (default sqlite3, rosbag2's).",
+)
+@click.option(
+    "--distractors",
+    default=None,
+    metavar="LIST",
+    help="Things of paint-like colour on the floor beside the piece: comma list of box, cone, "
+    "glove, or 'none' (default: the noise preset's; yard: all three).",
+)
+@click.option(
+    "--faded-marks",
+    type=config_type("sim.faded_marks"),
+    default=None,
+    help="Old faded marks of the same hue near the line (default: the noise preset's; yard 1).",
+)
+@click.option(
+    "--glints/--no-glints",
+    default=None,
+    help="Mirror-like spots on the steel (default: the noise preset's; yard on).",
+)
+@click.option(
+    "--paint-variation/--no-paint-variation",
+    default=None,
+    help="The can's colour varies around the preset's (default: on, except --noise ideal).",
+)
+@click.option(
     "--views",
     type=config_type("sim.views"),
     default=None,
@@ -134,9 +182,9 @@ METHODS = choice_names(FitMethod)
 @click.option(
     "-o",
     "--output",
-    type=click.Path(dir_okay=False, path_type=Path),
+    type=click.Path(path_type=Path),
     default=None,
-    help="MCAP file to write.",
+    help="MCAP file (*.mcap), or a ROS 2 bag directory (any other name) to write.",
 )
 @click.option(
     "--json",
@@ -154,6 +202,14 @@ def record(
     seed: int | None,
     width: int | None,
     height: int | None,
+    resolution: str | None,
+    color_encoding: str | None,
+    jpeg_quality: int | None,
+    storage: str | None,
+    distractors: str | None,
+    faded_marks: int | None,
+    glints: bool | None,
+    paint_variation: bool | None,
     views: int | None,
     frames_per_view: int | None,
     stroke_width_mm: float | None,
@@ -171,10 +227,11 @@ def record(
 ) -> None:
     """Simulate a scan of a spray-painted scrap piece: a Panda with a D435i on its hand.
 
-    Writes an MCAP with realsense-ros topics, /tf at 100 Hz, the painted reference on
-    /scrapcut/reference and the settings in its metadata; it opens in Foxglove and in every
-    scrapcut command. The piece is painted with the --paint preset's colour (--hsv only tunes
-    the filter of the explore planner).
+    Writes an MCAP (or a ROS 2 bag directory) with realsense-ros topics, /tf at 100 Hz, the
+    painted reference on /scrapcut/reference and the settings in its metadata; it opens in
+    Foxglove and in every scrapcut command. The piece is painted with a can of the --paint
+    preset's colour (each can a little different; --hsv only tunes the filter of the explore
+    planner). --noise yard also puts an old faded mark, distractors and glints in the scene.
     """
     from scrapcut_cli.commands._console import err, out, progress
     from scrapcut_cli.sim import list_objects
@@ -186,13 +243,21 @@ def record(
         return
     if output is None:
         raise click.UsageError("missing -o/--output (the MCAP file to write)")
-    if output.suffix != ".mcap":
+    if output.suffix.lower() == ".bag" or (output.suffix and output.suffix != ".mcap"):
         # Readers tell the format by name too: an MCAP called scan.bag would not open.
         raise click.BadParameter(
-            f"the simulator writes MCAP; name the file *.mcap, not {output.name!r} "
-            "(`scrapcut convert` then makes a ROS 1 or ROS 2 bag)",
+            f"the simulator writes MCAP (*.mcap) or a ROS 2 bag directory (a name without a "
+            f"suffix), not {output.name!r} (`scrapcut convert` makes a ROS 1 bag)",
             param_hint="-o/--output",
         )
+    if output.suffix != ".mcap" and output.is_file():
+        raise click.BadParameter(
+            f"{output} is a file; a ROS 2 bag is a directory", param_hint="-o/--output"
+        )
+    if resolution is not None:
+        if width is not None or height is not None:
+            raise click.UsageError("give --resolution or --width/--height, not both")
+        width, height = _parse_resolution(resolution)
 
     config = build_config(config_path, paint=paint, hsv=hsv)
     config = config.override("exploration", method=method, calibration_views=calibration_views)
@@ -215,6 +280,13 @@ def record(
         hand_eye_error_deg=hand_eye_error_deg,
         stamp_offset_s=mm_to_m(stamp_offset_ms),
         motion_frames_hz=motion_frames_hz,
+        color_encoding=color_encoding,
+        jpeg_quality=jpeg_quality,
+        storage=storage,
+        distractors=_parse_distractors(distractors),
+        faded_marks=faded_marks,
+        glints=glints,
+        paint_variation=paint_variation,
     )
     sim = config.sim
     validate(sim)
@@ -264,6 +336,42 @@ def _clearance_mm(clearance_m: float) -> str:
     return f"{1000.0 * clearance_m:.0f}" if clearance_m < 0.1 else "≥ 100"
 
 
+def _parse_resolution(text: str) -> tuple[int, int]:
+    """``1280x720`` -> (1280, 720); a usage error naming the value otherwise."""
+    parts = text.lower().replace("×", "x").split("x")
+    try:
+        width, height = (int(p) for p in parts)
+    except ValueError:
+        width = height = 0
+    if width < 16 or height < 12:
+        raise click.BadParameter(
+            f"expected WIDTHxHEIGHT, e.g. 1280x720 (at least 16x12), got {text!r}",
+            param_hint="--resolution",
+        )
+    return width, height
+
+
+def _parse_distractors(text: str | None) -> tuple[str, ...] | None:
+    """``box,cone`` -> ("box", "cone"); ``none`` -> (); a usage error for unknown names."""
+    from scrapcut_cli.sim.scene import DISTRACTOR_KINDS
+
+    if text is None:
+        return None
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    if names in ((), ("none",)):
+        return ()
+    if names == ("all",):
+        return DISTRACTOR_KINDS
+    unknown = [n for n in names if n not in DISTRACTOR_KINDS]
+    if unknown:
+        raise click.BadParameter(
+            f"unknown distractor {unknown[0]!r}; choose from {', '.join(DISTRACTOR_KINDS)}, "
+            "all or none",
+            param_hint="--distractors",
+        )
+    return names
+
+
 def _print_objects(console: Any, objects: list[tuple[str, str]]) -> None:
     from rich.table import Table
 
@@ -279,7 +387,9 @@ def _print_result(console: Any, result: Any) -> None:
     from rich.markup import escape
     from rich.table import Table
 
-    size_mb = result.path.stat().st_size / 1e6
+    path = result.path
+    files = [p for p in path.iterdir() if p.is_file()] if path.is_dir() else [path]
+    size_mb = sum(p.stat().st_size for p in files) / 1e6
     title = escape(f"{result.path} ({size_mb:.1f} MB)")
     table = Table(title=title, title_justify="left")
     table.add_column("")

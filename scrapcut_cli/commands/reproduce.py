@@ -33,7 +33,8 @@ def _names(values: tuple[str, ...]) -> list[str]:
     multiple=True,
     metavar="NAMES",
     help="Objects, comma-separated or repeated; 'all' adds slanted and planar_box "
-    "(default: the paper's five: cylinder, i_beam, t_piece, basket, air_chamber).",
+    "(default: the paper's five — cylinder, i_beam, t_piece, basket, air_chamber — and "
+    "perforated_plate).",
 )
 @click.option(
     "--methods",

@@ -157,8 +157,8 @@ def stitch(
     from scrapcut_cli.calibration.recipe import camera_mount_for
     from scrapcut_cli.commands._console import err, out, progress
     from scrapcut_cli.errors import PerceptionError
-    from scrapcut_cli.perception.paint import resolve_recording_paint
     from scrapcut_cli.perception.stitch import stitch_recording
+    from scrapcut_cli.pipeline.fit import paint_for_recording
     from scrapcut_cli.recording.reader import open_recording
 
     check_cloud_path(output, "-o")
@@ -175,7 +175,9 @@ def stitch(
 
     with open_recording(recording, config.recording, mount=mount) as rec:
         plan = rec.plan()
-        hsv = resolve_recording_paint(config.paint, rec.metadata)
+        hsv, estimate = paint_for_recording(rec, config)
+        if estimate is not None:
+            err.print(f"paint {estimate.describe()}", soft_wrap=True, markup=False)
         with progress("frames") as bar:
             task = bar.add_task("stitching", total=plan.usable, status="")
 

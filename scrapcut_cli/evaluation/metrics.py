@@ -30,6 +30,12 @@ truth when the reference carries it, else the arcs the path reports unobserved),
 unobserved arcs against the true ones (extent error of their ends, in arc length along the
 reference), and the share of set-points on the true arcs flagged ``unobserved`` (and
 elsewhere).
+
+When the path file says how sure each set-point is (``sigma_m``, docs/path-file.md), each reference
+sample's error is also set against σ at its nearest point of the curve (σ interpolated along
+the curve's arc length): ``within_2sigma`` is the share of samples within 2σ of the path — about
+95 % for a calibrated Gaussian σ; far less means σ is overconfident — and ``sigma_median_m`` the
+typical σ the path claimed.
 """
 
 from __future__ import annotations
@@ -86,6 +92,8 @@ class PathError:
         Root mean square, median and 95th percentile of the same distances.
     sample_points : (M, 3) float64, metres, base frame
         The reference samples themselves (``--save-results`` writes them beside the errors).
+    sample_sigma_m : (M,) float64 or None
+        σ the path claims at each sample's nearest curve point (None: the path has no σ).
     """
 
     mean_m: float
@@ -108,11 +116,19 @@ class PathError:
     sample_points: FloatArray | None = None
     closed: bool = False
     loop: LoopError | None = None
+    sample_sigma_m: FloatArray | None = None
 
     @property
     def samples(self) -> int:
         """Number of reference samples."""
         return len(self.sample_errors_m)
+
+    @property
+    def within_2sigma(self) -> float | None:
+        """Share (0–1) of reference samples within 2σ of the path (None without σ)."""
+        if self.sample_sigma_m is None:
+            return None
+        return float(np.mean(self.sample_errors_m <= 2.0 * self.sample_sigma_m))
 
     def summary_mm(self) -> dict[str, Any]:
         """Scalar figures for reports: millimetres, coverage as a share (0–1), plain floats."""
@@ -132,6 +148,10 @@ class PathError:
             "curve_length_mm": self.curve_length_m * MM,
             "samples": self.samples,
             "coverage_threshold_mm": self.coverage_threshold_m * MM,
+            "sigma_median_mm": None
+            if self.sample_sigma_m is None
+            else float(np.median(self.sample_sigma_m)) * MM,
+            "within_2sigma": self.within_2sigma,
             **({"closed": True} if self.closed else {}),
             **({} if self.loop is None else self.loop.summary_mm()),
         }
@@ -223,6 +243,7 @@ def path_error(
     reported_unobserved_m: Sequence[tuple[float, float]] = (),
     setpoints: ArrayLike | None = None,
     setpoint_unobserved: ArrayLike | None = None,
+    sigma_m: ArrayLike | None = None,
 ) -> PathError:
     """Measure a fitted curve against the painted reference curve.
 
@@ -245,12 +266,15 @@ def path_error(
         point (end < start wraps).
     setpoints, setpoint_unobserved : (K, 3) float64 and (K,) bool, optional
         The set-points' surface points on the loop and which carry ``unobserved``.
+    sigma_m : (N,) float64, optional
+        The path's lateral uncertainty at each curve point, metres (from its set-points):
+        each sample's error is then set against σ at its nearest curve point.
 
     Raises
     ------
     EvaluationError
-        If either polyline has fewer than two distinct points or non-finite coordinates, or
-        the configuration is not positive.
+        If either polyline has fewer than two distinct points or non-finite coordinates, σ
+        does not match the curve or is negative, or the configuration is not positive.
     """
     config = EvaluationConfig() if config is None else config
     for name in ("sample_spacing_m", "coverage_threshold_m"):
@@ -267,7 +291,16 @@ def path_error(
 
     ref_samples = resample_polyline(ref, config.sample_spacing_m)
     s = cumulative_length(ref_samples)
-    errors = PolylineDistance(curve).distance(ref_samples)
+    errors, _, parameter = PolylineDistance(curve).query(ref_samples)
+    sample_sigma = None
+    if sigma_m is not None:
+        sigma = np.asarray(sigma_m, dtype=np.float64).reshape(-1)
+        if len(sigma) != len(curve) or not (np.isfinite(sigma).all() and (sigma >= 0).all()):
+            raise EvaluationError(
+                f"sigma_m must hold one finite value >= 0 per curve point ({len(curve)}), "
+                f"got {len(sigma)}"
+            )
+        sample_sigma = np.interp(parameter, np.arange(len(curve), dtype=np.float64), sigma)
 
     curve_samples = resample_polyline(curve, config.sample_spacing_m)
     reverse = PolylineDistance(ref).distance(curve_samples)
@@ -308,6 +341,7 @@ def path_error(
             setpoints=setpoints,
             setpoint_unobserved=setpoint_unobserved,
         ),
+        sample_sigma_m=sample_sigma,
     )
 
 

@@ -277,6 +277,8 @@ CSV_FIELDS = (
     "reverse_mean_mm",
     "reverse_max_mm",
     "length_ratio",
+    "sigma_median_mm",
+    "within_2sigma",
     "reference_length_mm",
     "curve_length_mm",
     "samples",
@@ -328,6 +330,8 @@ COLUMNS = (
     "Rev. mean [mm]",
     "Rev. max [mm]",
     "Length ratio",
+    "σ [mm]",
+    "≤ 2σ",
     "Note",
 )
 #: ``scrapcut eval``'s tables (``detail=True``) add the file, the spread of the same distances
@@ -384,13 +388,15 @@ def table_lines(
             keys = ("rmse_mm", "median_mm", "p95_mm")
             cells += ["—" if figures is None else f"{figures[k]:.2f}" for k in keys]
         if figures is None:
-            cells += ["—"] * 4
+            cells += ["—"] * 6
         else:
             cells += [
                 f"{100.0 * figures['coverage']:.1f}%",
                 f"{figures['reverse_mean_mm']:.2f}",
                 f"{figures['reverse_max_mm']:.2f}",
                 f"{figures['length_ratio']:.3f}",
+                _optional(figures.get("sigma_median_mm"), "{:.2f}"),
+                _optional(figures.get("within_2sigma"), "{:.1%}"),
             ]
         if detail:
             cells += _setpoint_cells(row.setpoints)
@@ -532,6 +538,11 @@ def rich_table(
     return table
 
 
+def _optional(value: Any, fmt: str) -> str:
+    """``value`` formatted, or ``—`` when the path had no such figure (no σ)."""
+    return "—" if value is None else fmt.format(value)
+
+
 def _fmt_leaf(leaf_m: float) -> str:
     mm = leaf_m * 1000.0
     return f"{mm:.0f}" if math.isclose(mm, round(mm), abs_tol=1e-6) else f"{mm:.1f}"
@@ -570,7 +581,14 @@ def _rich_escape(text: str) -> str:
 # --------------------------------------------------------------------------- over seeds
 
 #: The figures averaged over simulator seeds, with a 95 % interval of their mean.
-INTERVAL_FIELDS = (*TABLE1_FIELDS, "coverage", "reverse_max_mm", "length_ratio")
+INTERVAL_FIELDS = (
+    *TABLE1_FIELDS,
+    "coverage",
+    "reverse_max_mm",
+    "length_ratio",
+    "sigma_median_mm",
+    "within_2sigma",
+)
 #: Confidence of the interval around a mean over seeds.
 CONFIDENCE = 0.95
 
@@ -629,7 +647,10 @@ def aggregate_rows(rows: Sequence[ReportRow]) -> list[SeedAggregate]:
         mean: dict[str, float] = {}
         half: dict[str, float | None] = {}
         for name in INTERVAL_FIELDS if figures else ():
-            values = np.array([f[name] for f in figures], dtype=np.float64)
+            present = [f[name] for f in figures if f.get(name) is not None]
+            if not present:  # σ of paths that carry none
+                continue
+            values = np.array(present, dtype=np.float64)
             mean[name] = float(values.mean())
             n = len(values)
             if n >= 2:
@@ -717,7 +738,7 @@ def render_interval_markdown(
         header.append(f"{_TITLES[f]} [mm]")
         if paper is not None:
             header.append(f"{_TITLES[f]} paper")
-    header += ["Coverage", "Rev. max [mm]", "Length ratio", "Note"]
+    header += ["Coverage", "Rev. max [mm]", "Length ratio", "σ [mm]", "≤ 2σ", "Note"]
     lines = ["| " + " | ".join(header) + " |"]
     lines.append("|" + "|".join(["---", "---"] + ["---:"] * (len(header) - 3) + ["---"]) + "|")
     worse_count = 0
@@ -736,6 +757,8 @@ def render_interval_markdown(
             agg.interval_text("coverage", percent=True),
             agg.interval_text("reverse_max_mm"),
             agg.interval_text("length_ratio"),
+            agg.interval_text("sigma_median_mm"),
+            agg.interval_text("within_2sigma", percent=True),
             "; ".join(
                 [
                     *agg.notes[:2],
@@ -748,7 +771,9 @@ def render_interval_markdown(
     lines.append(
         "Each figure is the mean over the runs (simulator seeds) ± the half width of its 95 % "
         "Student-t interval; runs = successful/all. Distances in millimetres from each reference "
-        "sample to the fitted curve; coverage = share of samples within the threshold."
+        "sample to the fitted curve; coverage = share of samples within the threshold; σ = the "
+        "median lateral uncertainty the path file claims at the samples, ≤ 2σ = share of samples "
+        "within 2σ of the path (about 95 % when σ is calibrated)."
     )
     if paper is not None:
         lines.append(
@@ -773,6 +798,7 @@ def interval_rich_table(
             _rich_escape(name), justify="left" if name in ("Object", "Method") else "right"
         )
     table.add_column("Coverage", justify="right")
+    table.add_column("≤ 2σ", justify="right")
     table.add_column("Note", max_width=40, overflow="fold")
     for agg in aggregates:
         figures_paper = None if paper is None else paper.get((agg.object, agg.method))
@@ -783,6 +809,7 @@ def interval_rich_table(
             cells.append(f"[red]{text} {WORSE_MARK}[/red]" if f in worse else text)
         cells += [
             agg.interval_text("coverage", percent=True),
+            agg.interval_text("within_2sigma", percent=True),
             _rich_escape("; ".join(agg.notes[:1])),
         ]
         table.add_row(*cells)
@@ -790,7 +817,7 @@ def interval_rich_table(
             table.add_row(
                 "", "paper", "1",
                 *(f"{getattr(figures_paper, f):.2f}" for f in TABLE1_FIELDS),
-                "", _rich_escape(figures_paper.note), style="dim",
+                "", "", _rich_escape(figures_paper.note), style="dim",
             )  # fmt: skip
     return table
 

@@ -31,7 +31,7 @@ from scrapcut_cli.evaluation.checks import check_scale, row_warnings
 from scrapcut_cli.evaluation.metrics import path_error, setpoint_error
 from scrapcut_cli.evaluation.report import ReportRow
 from scrapcut_cli.fitting.curve import Curve
-from scrapcut_cli.geometry import MAX_COORDINATE_M, closed_polyline
+from scrapcut_cli.geometry import MAX_COORDINATE_M, closed_polyline, cumulative_length
 from scrapcut_cli.toolpath.path import CuttingPath
 
 
@@ -44,6 +44,8 @@ class PathFile:
     ``setpoint_surface_points`` : (K, 3) float64, metres — where each set-point's torch axis
     meets the piece (K may be 0); ``setpoint_flags`` their flags; ``setpoint_positions`` and
     ``setpoint_orientations_xyzw`` (K, 3), (K, 4) the torch tip poses (for the review file).
+    ``curve_sigma_m`` : (N,) float64 or None — the set-points' σ (metres) carried to the curve
+    points by arc length, when the file has it.
     """
 
     path: Path
@@ -63,6 +65,7 @@ class PathFile:
     unobserved_arcs_m: tuple[tuple[float, float], ...] = ()
     setpoints: NDArray[np.float64] | None = None  # (K, 3) surface points of the cut
     setpoint_unobserved: NDArray[np.bool_] | None = None  # (K,)
+    curve_sigma_m: NDArray[np.float64] | None = None
 
     @property
     def name(self) -> str:
@@ -149,6 +152,7 @@ def _path_file(path: Path, curve: Curve, cutting: CuttingPath, meta: dict[str, A
         unobserved_arcs_m=arcs,
         setpoints=cutting.surface_points[cut],
         setpoint_unobserved=np.array(["unobserved" in cutting.flags[i] for i in cut], dtype=bool),
+        curve_sigma_m=_curve_sigma(curve, cutting),
     )
 
 
@@ -163,6 +167,16 @@ def _arc_pairs(value: Any, where: str) -> tuple[tuple[float, float], ...]:
     if not np.isfinite(arcs).all():
         raise EvaluationError(f"{where} holds NaN or infinite values")
     return tuple((float(a), float(b)) for a, b in arcs)
+
+
+def _curve_sigma(curve: Curve, cutting: CuttingPath) -> NDArray[np.float64] | None:
+    """The set-points' σ at the curve's points, by arc length (set-point ``s`` runs along the
+    curve's polyline); None without σ or with fewer than two set-points."""
+    if cutting.sigma_m is None or len(cutting) < 2:
+        return None
+    s = cumulative_length(np.asarray(curve.points, dtype=np.float64))
+    order = np.argsort(cutting.arc_length, kind="stable")
+    return np.asarray(np.interp(s, cutting.arc_length[order], cutting.sigma_m[order]))
 
 
 def read_reference_csv(path: str | Path) -> NDArray[np.float64]:
@@ -400,6 +414,7 @@ def evaluate_path_file(
             reported_unobserved_m=path_file.unobserved_arcs_m,
             setpoints=path_file.setpoints,
             setpoint_unobserved=path_file.setpoint_unobserved,
+            sigma_m=path_file.curve_sigma_m,
         )
         setpoints = setpoint_error(
             path_file.setpoint_surface_points,
@@ -413,7 +428,12 @@ def evaluate_path_file(
             alignment = align_curve(
                 path_file.curve_points, reference.points, sample_spacing_m=config.sample_spacing_m
             )
-            aligned = path_error(alignment.aligned_points, reference.points, config=config)
+            aligned = path_error(
+                alignment.aligned_points,
+                reference.points,
+                config=config,
+                sigma_m=path_file.curve_sigma_m,
+            )
     except ScrapcutError as exc:
         raise EvaluationError(f"{path_file.path}: {exc}") from None
     loop_note = loop_summary(error.summary_mm()) if error.loop is not None else ""

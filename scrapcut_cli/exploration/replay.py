@@ -569,7 +569,7 @@ def what_if(
         A planner parameter out of range (before any frame is read), no usable frames, no
         paint in any, or ``start_frame`` out of range.
     """
-    from scrapcut_cli.perception.paint import resolve_recording_paint
+    from scrapcut_cli.pipeline.fit import paint_for_recording
     from scrapcut_cli.recording.reader import open_recording
 
     path = Path(recording)
@@ -579,7 +579,7 @@ def what_if(
 
     mount, _ = camera_mount_for(path, config)
     with open_recording(path, config.recording, mount=mount) as rec:
-        hsv = resolve_recording_paint(config.paint, rec.metadata)
+        hsv, _ = paint_for_recording(rec, config)
         total = rec.plan().usable
         last: FloatArray | None = None
         for done, frame in enumerate(rec.frames(), start=1):
@@ -696,6 +696,10 @@ def _finish(
         tally=planner.tally,
         hsv=planner.hsv,
         base_frame=planner.base_frame,
+        paint_rgb=st.paint_rgb,
+        other_points=st.other_points,
+        other_rgb=st.other_rgb,
+        **st.kept_clouds(),
     )
     settings = planner_config_dict(config)
     if extra:

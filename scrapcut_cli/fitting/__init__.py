@@ -2,12 +2,18 @@
 
 ``fit_curve(points_base, method, config)`` runs the fitter named by ``method`` on a stitched
 paint cloud and returns a :class:`~scrapcut_cli.fitting.curve.Curve` running along the centre
-of the painted band. ``extrapolate_end`` gives the exploration planner the direction in which
-the line continues beyond one end of a fitted curve (the paper's Algorithm 1).
+of the painted band; given a stroke model (:func:`~scrapcut_cli.fitting.stroke.stroke_model`:
+the centre from the stroke's edges, holes not taken for edges) both fitters follow it.
+:func:`~scrapcut_cli.fitting.stroke.with_confidence` adds each curve point's confidence.
+``trim_to_paint`` cuts back whatever of a curve runs past its paint at the ends and measures the
+reverse distance (curve to paint). ``extrapolate_end`` gives the exploration planner the
+direction in which the line continues beyond one end of a fitted curve (the paper's
+Algorithm 1).
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Literal
 
 import numpy as np
@@ -15,12 +21,20 @@ from numpy.typing import ArrayLike, NDArray
 
 from scrapcut_cli.config import FitMethod, ScrapcutConfig, choice_names
 from scrapcut_cli.errors import FittingError
+from scrapcut_cli.fitting._common import clip_to_extent
 from scrapcut_cli.fitting.closure import Closure, detect_closure, unobserved_arcs
 from scrapcut_cli.fitting.curve import Curve, NurbsModel
-from scrapcut_cli.fitting.nurbs import fit_nurbs, nurbs_to_geomdl, nurbs_to_geomdl_json
+from scrapcut_cli.fitting.ends import past_paint
+from scrapcut_cli.fitting.nurbs import (
+    fit_nurbs,
+    nurbs_to_geomdl,
+    nurbs_to_geomdl_json,
+    retarget_domain,
+)
 from scrapcut_cli.fitting.nurbs_closed import fit_closed_nurbs
 from scrapcut_cli.fitting.skeleton import fit_skeleton
-from scrapcut_cli.geometry import cumulative_length
+from scrapcut_cli.fitting.stroke import StrokeModel
+from scrapcut_cli.geometry import cumulative_length, resample_polyline
 
 __all__ = [
     "METHODS",
@@ -35,6 +49,7 @@ __all__ = [
     "fit_skeleton",
     "nurbs_to_geomdl",
     "nurbs_to_geomdl_json",
+    "trim_to_paint",
 ]
 
 METHODS = choice_names(FitMethod)
@@ -49,9 +64,12 @@ def fit_curve(
     config: ScrapcutConfig,
     *,
     closure: Closure | None = None,
+    stroke: StrokeModel | None = None,
 ) -> Curve:
     """Fit the curve of ``method`` ("nurbs" or "skeleton") to ``points_base`` (N, 3) float64,
-    metres, base frame, with that method's section of ``config``.
+    metres, base frame, with that method's section of ``config``; with ``stroke`` (the stroke
+    model of the same paint, :mod:`~scrapcut_cli.fitting.stroke`) an open fit follows the
+    stroke's centre from its edges.
 
     ``closure``: :func:`~scrapcut_cli.fitting.closure.detect_closure` of these points (and the
     surface around them); when it is closed the fit is a loop (a periodic NURBS, the
@@ -68,9 +86,9 @@ def fit_curve(
         curve.info["closure_reason"] = closure.reason
         return curve
     if method == "nurbs":
-        curve = fit_nurbs(points_base, config=config.nurbs)
+        curve = fit_nurbs(points_base, config=config.nurbs, stroke=stroke)
     else:
-        curve = fit_skeleton(points_base, config=config.skeleton)
+        curve = fit_skeleton(points_base, config=config.skeleton, stroke=stroke)
     if closure is not None:
         curve.info["closure"] = closure.info()
         curve.info["closure_reason"] = closure.reason
@@ -82,6 +100,8 @@ def fit_line(
     surface_base: ArrayLike | None,
     method: str,
     config: ScrapcutConfig,
+    *,
+    stroke: StrokeModel | None = None,
 ) -> Curve:
     """A stitched line's curve, open or closed: the global fit of a scan.
 
@@ -89,10 +109,11 @@ def fit_line(
     surface ``surface_base`` (M, 3) around it (metres, base frame; :func:`detect_closure`),
     fits ``method`` open or closed, and on a closed curve finds the arcs where neither paint
     nor surface was observed (``info["unobserved_arcs_m"]``: [start, end] metres along
-    ``points`` from its first point, end < start when an arc runs across it).
+    ``points`` from its first point, end < start when an arc runs across it). ``stroke``:
+    the stroke model an open fit follows (see :func:`fit_curve`).
     """
     closure = detect_closure(paint_base, surface_base, config=config.closure)
-    curve = fit_curve(paint_base, method, config, closure=closure)
+    curve = fit_curve(paint_base, method, config, closure=closure, stroke=stroke)
     if curve.closed:
         arcs = unobserved_arcs(
             curve.points,
@@ -103,6 +124,33 @@ def fit_line(
         )
         curve.info["unobserved_arcs_m"] = [[a, b] for a, b in arcs]
     return curve
+
+
+def trim_to_paint(curve: Curve, paint_base: ArrayLike, *, tolerance_m: float) -> Curve:
+    """``curve`` without what runs past the paint ``paint_base`` (N, 3) at its ends by more
+    than ``tolerance_m`` (``fitting.ends.past_paint``), NURBS model included; ``info`` gains
+    ``paint_trim_m`` (per end), ``reverse_mean_m`` and ``reverse_max_m`` (curve to paint).
+    A closed curve is not trimmed (it has no ends); its reverse distance is reported."""
+    paint = np.asarray(paint_base, dtype=np.float64).reshape(-1, 3)
+    if curve.closed:  # a loop has no ends to run past: only the reverse distance is reported
+        whole = replace(past_paint(curve.polyline, paint, tolerance_m=np.inf), tolerance_m=0.0)
+        return replace(curve, info={**curve.info, **whole.info()})
+    check = past_paint(curve.points, paint, tolerance_m=tolerance_m)
+    info = {**curve.info, **check.info()}
+    if check.trims == (0.0, 0.0) or check.end - check.start <= curve.spacing_m:
+        return Curve(curve.points, curve.method, curve.nurbs, curve.spacing_m, info)
+    points = resample_polyline(
+        clip_to_extent(curve.points, check.start, check.end), curve.spacing_m
+    )
+    nurbs = curve.nurbs
+    if nurbs is not None and np.allclose(nurbs.weights, 1.0):
+        lo, hi = nurbs.domain
+        t = np.linspace(lo, hi, max(int(curve.length / 0.0002), 200))
+        s = cumulative_length(nurbs.evaluate(t))
+        a, b = np.interp([check.start, check.end], s, t)
+        knots, ctrl = retarget_domain(nurbs.knots, nurbs.control_points, nurbs.degree, a, b)
+        nurbs = NurbsModel(nurbs.degree, knots, ctrl, np.ones(len(ctrl)))
+    return Curve(points, curve.method, nurbs, curve.spacing_m, info)
 
 
 def extrapolate_end(

@@ -84,6 +84,56 @@ class NurbsModel:
         )
 
 
+#: Below this share of its band painted a curve point has low support.
+LOW_SUPPORT = 0.5
+
+
+@dataclass(frozen=True, eq=False)
+class CurveConfidence:
+    """How sure each point of a fitted curve is (one value per ``Curve.points`` row).
+
+    ``support`` (K,) share 0-1 of the stroke's band around the point that holds paint;
+    ``frames`` (K,) the most frames that saw a paint voxel there (0: none); ``sigma_m`` (K,)
+    lateral uncertainty, metres; ``bridged_gap`` (K,) no surface under the point (a hole,
+    a gap in a mesh: the curve bridges it); ``low_support`` (K,) support below
+    :data:`LOW_SUPPORT`.
+    """
+
+    support: NDArray[np.float64]
+    frames: NDArray[np.int64]
+    sigma_m: NDArray[np.float64]
+    bridged_gap: NDArray[np.bool_]
+    low_support: NDArray[np.bool_]
+
+    def reversed(self) -> CurveConfidence:
+        return CurveConfidence(
+            self.support[::-1].copy(),
+            self.frames[::-1].copy(),
+            self.sigma_m[::-1].copy(),
+            self.bridged_gap[::-1].copy(),
+            self.low_support[::-1].copy(),
+        )
+
+    def at(self, index: ArrayLike) -> CurveConfidence:
+        """The confidence of the curve points ``index`` (M,)."""
+        i = np.asarray(index, dtype=np.int64)
+        return CurveConfidence(
+            self.support[i], self.frames[i], self.sigma_m[i], self.bridged_gap[i],
+            self.low_support[i],
+        )  # fmt: skip
+
+    def summary(self) -> dict[str, Any]:
+        """Counts and σ figures for ``Curve.info`` and reports."""
+        n = max(len(self.sigma_m), 1)
+        return {
+            "sigma_median_m": float(np.median(self.sigma_m)) if len(self.sigma_m) else 0.0,
+            "sigma_max_m": float(np.max(self.sigma_m)) if len(self.sigma_m) else 0.0,
+            "bridged_gap_share": float(np.count_nonzero(self.bridged_gap) / n),
+            "low_support_share": float(np.count_nonzero(self.low_support) / n),
+            "support_mean": float(np.mean(self.support)) if len(self.support) else 0.0,
+        }
+
+
 #: ``Curve.info`` entries listed from the curve's start to its end (skeleton vertices, the
 #: per-end trims and shapes): :meth:`Curve.reversed` reverses them.
 ORDERED_INFO = ("skeleton_points", "end_trim_m", "end_shape")
@@ -96,7 +146,8 @@ class Curve:
     ``points`` are evenly resampled along the curve (spacing ``spacing_m``). ``nurbs`` is set by
     the NURBS fitter; ``info`` carries method diagnostics (residuals, iterations, pieces...).
     ``closed``: the curve is a loop; its last point joins its first, which ``points`` does not
-    repeat (:attr:`polyline` does).
+    repeat (:attr:`polyline` does). ``confidence`` says how sure each point is (None when not
+    estimated).
     """
 
     points: NDArray[np.float64]
@@ -105,6 +156,7 @@ class Curve:
     spacing_m: float = 0.001
     info: dict[str, Any] = field(default_factory=dict)
     closed: bool = False
+    confidence: CurveConfidence | None = None
 
     @property
     def polyline(self) -> NDArray[np.float64]:
@@ -162,4 +214,5 @@ class Curve:
             spacing_m=self.spacing_m,
             info=info,
             closed=self.closed,
+            confidence=None if self.confidence is None else self.confidence.reversed(),
         )

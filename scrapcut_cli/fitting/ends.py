@@ -72,11 +72,16 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import ConvexHull, QhullError
+from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from scrapcut_cli.errors import FittingError
 from scrapcut_cli.fitting._common import arc_positions, extended_polyline, extent_of
-from scrapcut_cli.geometry import cumulative_length, interpolate_polyline, polyline_length
+from scrapcut_cli.geometry import (
+    cumulative_length,
+    interpolate_polyline,
+    polyline_length,
+    resample_polyline,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -635,3 +640,70 @@ class _Search:
         score = (mean - np.log(area)) * m.weight + self.prior[:, None]
         r, k = np.unravel_index(int(np.argmax(score)), score.shape)
         return float(ends[k]), float(score[r, k])
+
+
+# --------------------------------------------------------------------------- past the paint
+
+
+@dataclass(frozen=True)
+class PaintCheck:
+    """How a fitted curve sits on the paint it was fitted to (the reverse distance).
+
+    ``start`` and ``end`` are the arc lengths (metres) between which the curve stays within
+    ``tolerance_m`` of the paint at its ends (0 and the length when nothing runs past it);
+    ``trims`` how far each end ran past the paint; ``reverse_mean_m`` and ``reverse_max_m``
+    the distance from the curve (every ~1 mm) to its nearest paint point, over the part kept.
+    """
+
+    start: float
+    end: float
+    trims: tuple[float, float]
+    reverse_mean_m: float
+    reverse_max_m: float
+    tolerance_m: float
+
+    def info(self) -> dict[str, Any]:
+        """``curve.info`` entries (``paint_trim_m`` lists the start's trim first)."""
+        return {
+            "paint_trim_m": [float(self.trims[0]), float(self.trims[1])],
+            "paint_tolerance_m": float(self.tolerance_m),
+            "reverse_mean_m": float(self.reverse_mean_m),
+            "reverse_max_m": float(self.reverse_max_m),
+        }
+
+
+def past_paint(polyline: FloatArray, paint: FloatArray, *, tolerance_m: float) -> PaintCheck:
+    """Where an ordered polyline (K, 3) runs past the paint (N, 3) at its ends.
+
+    The stroke-end model ends a line inside its paint (at a round cap's centre, a square
+    end's edge or on the last wire of gapped paint), so no end point of a good curve is farther
+    than a stitching voxel or two from a paint point. Walking in from each end, everything
+    before the first point within ``tolerance_m`` of the paint ran past it (an extrapolated
+    spline, a skeleton spur into nothing); the crossing is interpolated between the samples.
+    Interior stretches farther from the paint (a wire mesh's gaps) are the fit's business and
+    only count in the reverse distance.
+    """
+    pts = np.asarray(polyline, dtype=np.float64)
+    dense = resample_polyline(pts, 0.001) if polyline_length(pts) > 0 else pts
+    s = cumulative_length(dense)
+    distance, _ = cKDTree(np.asarray(paint, dtype=np.float64)).query(dense)
+    ok = np.flatnonzero(distance <= tolerance_m)
+    length = float(s[-1])
+    if ok.size == 0:  # nowhere near its paint: nothing to measure against, keep it whole
+        return PaintCheck(
+            0.0, length, (0.0, 0.0), float(distance.mean()), float(distance.max()), tolerance_m
+        )
+    first, last = int(ok[0]), int(ok[-1])
+    start = _crossing(s, distance, first, first - 1, tolerance_m) if first > 0 else 0.0
+    end = _crossing(s, distance, last, last + 1, tolerance_m) if last < len(s) - 1 else length
+    kept = distance[first : last + 1]
+    return PaintCheck(
+        start, end, (start, length - end), float(kept.mean()), float(kept.max()), tolerance_m
+    )
+
+
+def _crossing(s: FloatArray, d: FloatArray, inside: int, outside: int, level: float) -> float:
+    """Arc length between samples ``inside`` (d <= level) and ``outside`` where d = level."""
+    span = d[outside] - d[inside]
+    t = 0.0 if span <= 0 else float(np.clip((level - d[inside]) / span, 0.0, 1.0))
+    return float(s[inside] + t * (s[outside] - s[inside]))

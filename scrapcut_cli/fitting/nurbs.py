@@ -4,6 +4,9 @@ The recipe (:func:`fit_nurbs`):
 
 1. Move the cloud to its canonical frame (``_common``) so the fit does not depend on its pose;
    a cloud of more than ``MAX_FIT_POINTS`` is fitted through count-weighted voxel centroids.
+   With a stroke model (``fitting.stroke``: the stroke's centre from its two edges and width,
+   holes not taken for edges) the paint is first moved across the line so that its centre is
+   the stroke's (``StrokeModel.recentre``); its height and its ends stay the paint's.
 2. Initial parameters: the paper's principal-axis projection, and arc lengths along a chain
    down the middle of the cloud built from geodesic distances (``ordering``), which also
    orders arcs, U shapes and helices. ``init="auto"`` runs a few iterations from both and
@@ -75,6 +78,7 @@ from scrapcut_cli.fitting._common import (
 from scrapcut_cli.fitting.curve import Curve, NurbsModel
 from scrapcut_cli.fitting.ends import StrokeEnds, check_end_trim, stroke_ends
 from scrapcut_cli.fitting.ordering import geodesic_positions, voxel_centroids
+from scrapcut_cli.fitting.stroke import StrokeModel
 from scrapcut_cli.geometry import cumulative_length, resample_polyline
 
 FloatArray = NDArray[np.float64]
@@ -116,7 +120,12 @@ class _Fit:
         return BSpline(self.knots, self.control_points, self.degree)
 
 
-def fit_nurbs(points_base: ArrayLike, *, config: NurbsConfig | None = None) -> Curve:
+def fit_nurbs(
+    points_base: ArrayLike,
+    *,
+    config: NurbsConfig | None = None,
+    stroke: StrokeModel | None = None,
+) -> Curve:
     """Fit an open NURBS curve through the centre of a painted band.
 
     Parameters
@@ -126,6 +135,10 @@ def fit_nurbs(points_base: ArrayLike, *, config: NurbsConfig | None = None) -> C
     config : NurbsConfig, optional
         Degree, control points, smoothness, iterations, refinement (see the module docstring);
         default: ``NurbsConfig()`` (the paper's smoothness 1.0).
+    stroke : StrokeModel, optional
+        The stroke's centre from its edges (:mod:`~scrapcut_cli.fitting.stroke`): the paint
+        is moved across the line onto it first (its centre is off the line where a hole took
+        part of the stroke); the unknown stretches are bridged by the curve's smoothness.
 
     Returns
     -------
@@ -146,6 +159,8 @@ def fit_nurbs(points_base: ArrayLike, *, config: NurbsConfig | None = None) -> C
     config = config if config is not None else NurbsConfig()
     _check_config(config)
     pts = as_points(points_base, minimum=max(2 * (config.degree + 1), 8), what="NURBS fit")
+    if stroke is not None:
+        pts = stroke.recentre(pts)
     frame = CanonicalFrame.of(pts)
     order = canonical_order(frame.to_local(pts))
     x = frame.to_local(pts)[order]

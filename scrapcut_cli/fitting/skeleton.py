@@ -3,7 +3,11 @@
 The recipe (:func:`fit_skeleton`), in the cloud's canonical frame (``_common``) so the voxel
 grid turns with the object and the result does not depend on its pose:
 
-1. Voxelise the paint at the leaf size (the paper's 5 mm by default). Clusters of stray paint
+1. With a stroke model (``fitting.stroke``), move the paint across the line onto the stroke's
+   centre (``StrokeModel.recentre``). Voxelise the paint at the leaf size (the paper's 5 mm by
+   default), with the model's line: it keeps the paint one piece across a hole or a mesh's gap
+   (the paper's 5 mm skeleton broke there), and its piece is the stroke's (paint on a wire
+   beside the line, not touching it, is side paint, not a second piece). Clusters of stray paint
    (under 0.2 % of the points) are dropped; holes of up to ``closing_voxels`` voxels are
    closed (a morphological closing: it fills a holey band but does not bridge the centimetre
    gaps of a wire basket at 5 mm, as the paper found).
@@ -40,6 +44,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
+from scipy.spatial import cKDTree
 
 from scrapcut_cli.config import SkeletonConfig
 from scrapcut_cli.errors import FittingError
@@ -58,6 +63,7 @@ from scrapcut_cli.fitting.closure import Closure, hermite_bridge, paint_end
 from scrapcut_cli.fitting.curve import Curve
 from scrapcut_cli.fitting.ends import check_end_trim, stroke_ends
 from scrapcut_cli.fitting.ordering import tree_diameter
+from scrapcut_cli.fitting.stroke import StrokeModel
 from scrapcut_cli.geometry import (
     PolylineDistance,
     closed_polyline,
@@ -108,6 +114,7 @@ def fit_skeleton(
     *,
     config: SkeletonConfig | None = None,
     closure: Closure | None = None,
+    stroke: StrokeModel | None = None,
 ) -> Curve:
     """Fit the painted line's centre by 3-D skeletonisation of the voxelised paint.
 
@@ -118,6 +125,11 @@ def fit_skeleton(
     config : SkeletonConfig, optional
         Leaf size, closing, pruning, refinement and the dense-block budget (default: the
         paper's 5 mm leaf).
+    stroke : StrokeModel, optional
+        The stroke's centre from its edges (:mod:`~scrapcut_cli.fitting.stroke`): the paint is
+        moved across the line onto it, and its line where no paint is near (a hole, the gap
+        between two wires) is voxelised with the paint, so a mesh's paint stays one piece at a
+        fine leaf.
 
     Returns
     -------
@@ -139,15 +151,19 @@ def fit_skeleton(
     config = config if config is not None else SkeletonConfig()
     _check_config(config)
     pts = as_points(points_base, minimum=4, what="skeleton fit")
+    if stroke is not None:
+        pts = stroke.recentre(pts)
     frame = CanonicalFrame.of(pts)
     x = frame.to_local(pts)
     leaf = float(config.leaf_size_m)
 
     # Voxel centres on the canonical origin: a flat band through the centroid fills one layer
     # of voxels rather than straddling two.
-    keys = np.floor(x / leaf + 0.5).astype(np.int64)
-    packed = _pack(keys)
-    occupied, counts = np.unique(packed, return_counts=True)
+    bridge = _bridge_points(stroke, frame, leaf)
+    keys = np.floor(np.vstack([x, bridge]) / leaf + 0.5).astype(np.int64)
+    packed_all = _pack(keys)
+    packed = packed_all[: len(x)]
+    occupied, counts = np.unique(packed_all, return_counts=True)
     # Stray paint (a few points the outlier filter left) is dropped before the closing could
     # glue it to the band as a spur: 26-connected clusters of fewer than 0.2 % of the points.
     _, clusters = _components(occupied)
@@ -161,6 +177,14 @@ def fit_skeleton(
     point_piece = np.where(closed[idx] == packed, labels[idx], -1)
     share = np.bincount(point_piece[point_piece >= 0], minlength=n_pieces) / len(pts)
     significant = np.flatnonzero(share >= config.min_piece_share)
+    if len(bridge):
+        # The stroke model's line runs through the stroke: its piece is the line; paint in
+        # other pieces (a wire beside the line, not crossing it) is the band's side paint.
+        line_keys = np.unique(packed_all[len(x) :])
+        at = np.clip(np.searchsorted(closed, line_keys), 0, len(closed) - 1)
+        on_line = labels[at[closed[at] == line_keys]]
+        if len(on_line):
+            significant = np.array([int(np.bincount(on_line).argmax())])
     if len(significant) != 1:
         pieces = len(significant) if len(significant) else n_pieces
         raise FittingError(
@@ -181,7 +205,8 @@ def fit_skeleton(
             "try a smaller --leaf-size"
         )
     path = thinning.skeleton[order].astype(np.float64) * leaf
-    paint = x[inside]
+    # With a stroke model every kept point is the band's (its side paint included).
+    paint = x[point_piece >= 0] if len(bridge) else x[inside]
     if closure is not None and closure.closed:
         centre, how = _closed_centre(thinning.skeleton, path, paint, frame, closure, config)
         polyline = resample_loop(centre, config.sample_spacing_m)
@@ -222,10 +247,16 @@ def fit_skeleton(
     centre = moving_average(stations, 2 * round(window / _STATION_M) + 1)
     reach = max(3.0 * leaf, 2.0 * window)
     centre = _extend_to_data(_trim(centre, window), paint, config, span=window)
+    # Across a gap the model's line is all there is to centre on.
+    if len(bridge):
+        gap = ~np.isfinite(cKDTree(paint).query(bridge, distance_upper_bound=0.5 * leaf)[0])
+        targets = np.vstack([paint, bridge[gap]])
+    else:
+        targets = paint
     for _ in range(int(config.refine_iterations)):
         centre = _centre_on_paint(
             centre,
-            paint,
+            targets,
             window=window,
             radius=config.refine_radius_m,
             corner_reach=reach,
@@ -279,6 +310,17 @@ def fit_skeleton(
             **ends.info(mode=config.end_trim, forward=forward),
         },
     )
+
+
+def _bridge_points(stroke: StrokeModel | None, frame: CanonicalFrame, leaf: float) -> FloatArray:
+    """The stroke model's line every half leaf, in the canonical frame ((0, 3) without a model
+    or without a known centre)."""
+    if stroke is None or not stroke.known.any():
+        return np.zeros((0, 3))
+    line = stroke.line()
+    if len(line) < 2:
+        return np.zeros((0, 3))
+    return frame.to_local(resample_polyline(line, 0.5 * leaf))
 
 
 def _check_config(config: SkeletonConfig) -> None:

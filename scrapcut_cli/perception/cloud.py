@@ -2,11 +2,16 @@
 
 The recipe of one frame (:func:`process_frame`), in order:
 
-1. colour filter (:func:`~scrapcut_cli.perception.paint.paint_pixel_indices`), then isolated
-   paint pixels dropped (fewer than ``min_paint_neighbors`` of 4 neighbours in the range:
-   camera noise lifting single pixels of rust into the range), then small blobs (8-connected
-   paint covering less than ``min_paint_area_m2`` of surface: overspray specks, which stitch
-   into a halo around the stroke and past its ends);
+1. colour filter (:func:`~scrapcut_cli.perception.paint.paint_pixel_indices`); when the
+   filter's pixels fall into two saturation clusters (a clear dip between modes,
+   :func:`~scrapcut_cli.perception.paint.saturation_splits`: fresh paint against rust or an
+   old mark of the same hue, which a range cannot tell apart), the duller ones are kept apart
+   (``other_base``, processed alike) so the frame's paint is the paint's own colour; then
+   isolated paint pixels are dropped (fewer than ``min_paint_neighbors`` of 4 neighbours in
+   the range: camera noise lifting single pixels of rust into the range), then small blobs
+   (8-connected paint covering less than ``min_paint_area_m2`` of surface: overspray specks,
+   which stitch into a halo around the stroke and past its ends); blobs wider than any stroke
+   (``max_stroke_width_m``: a crate's face, a cone) join the other paint;
 2. depth gate: valid depth within ``[min_depth_m, max_depth_m]`` and no flying pixel (a depth
    that jumps by more than ``flying_pixel_ratio × depth`` to one of its 4-neighbours: the
    smeared pixels a stereo camera produces across depth edges);
@@ -17,7 +22,15 @@ The recipe of one frame (:func:`process_frame`), in order:
    scale of the stroke instead of sensor noise, and costs 1 ms instead of 30 ms per frame;
 5. the surface band: non-paint pixels within ``surface_band_m`` (in 3-D) of the paint, sampled
    on a pixel grid about half a ``surface_voxel_m`` apart, downsampled at ``surface_voxel_m``.
-   The tool path takes its normals and collision checks from it, on both sides of the stroke.
+   The tool path takes its normals and collision checks from it, on both sides of the stroke;
+6. the stroke's edges (:func:`stroke_edge_points`): where the paint stops and metal goes on.
+   A paint pixel next to a non-paint one is an edge of the stroke only if the depth beyond it
+   shows a surface that could carry paint: a short run of valid depth continuing the paint's
+   surface. Where it shows a hole (no depth, or the background far behind, with the flying
+   pixels at the rim between), the paint's boundary is not the stroke's edge and is left out.
+   The image is where this is decided: a frame's depth says directly which neighbour of a
+   paint pixel is metal, before stitching blurs views together (``fitting.stroke`` explains
+   the choice).
 
 :class:`PerceptionTally` counts frames, pixels, points and skip reasons over a recording and
 raises the "no paint found" error with the dominant hues the images showed instead.
@@ -32,13 +45,18 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.ndimage import label, maximum_filter
+from scipy.ndimage import find_objects, label, maximum_filter
 from scipy.spatial import cKDTree
 
 from scrapcut_cli._open3d import o3d
 from scrapcut_cli.config import PerceptionConfig
 from scrapcut_cli.errors import PerceptionError
-from scrapcut_cli.perception.paint import HsvRange, HueHistogram, paint_pixel_indices
+from scrapcut_cli.perception.paint import (
+    HsvRange,
+    HueHistogram,
+    paint_pixels_with_saturation,
+    saturation_splits,
+)
 from scrapcut_cli.recording.frame import CameraModel, Frame
 
 FloatArray = NDArray[np.float64]
@@ -55,6 +73,9 @@ SKIP_NO_VALID_DEPTH = "no_valid_depth"
 SKIP_TOO_LITTLE_PAINT = "too_little_paint"
 #: More of the image in the paint's colour than PerceptionConfig.max_paint_share: no stroke.
 SKIP_PAINT_FILLS_IMAGE = "paint_fills_image"
+#: The paint's colour only in blobs wider than PerceptionConfig.max_stroke_width_m (a crate, a
+#: cone, a painted wall): kept apart as other paint, no stroke.
+SKIP_PAINT_TOO_WIDE = "paint_too_wide"
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,8 +97,20 @@ class FrameClouds:
     T_base_cam : (4, 4) float64
         The camera pose the points were projected with.
     skip_reason : str or None
-        ``no_paint``, ``scattered_paint``, ``no_valid_depth`` or ``too_little_paint`` when
-        ``paint_base`` is empty.
+        ``no_paint``, ``scattered_paint``, ``no_valid_depth``, ``too_little_paint``,
+        ``paint_too_wide`` or ``paint_fills_image`` when ``paint_base`` is empty.
+    paint_rgb : (N, 3) float32
+        Mean sRGB (0-1) of the pixels behind each paint point (empty: colour unknown).
+    other_base : (P, 3) float64
+        Metres, base frame: the filter's pixels of a duller saturation cluster than the paint
+        (rust, an old mark) in this frame, processed as the paint; ``other_rgb`` (P, 3) their
+        colours. Empty when the frame's filtered pixels form one cluster.
+    view_centre : (3,) float64 or None
+        Where the optical axis meets the observed surface (metres, base frame): what the view
+        looks at. None when the image centre has no depth.
+    edge_base : (E, 3) float64
+        Metres, base frame: the stroke's edges seen in this frame (paint next to metal, not
+        next to a hole), downsampled (:func:`stroke_edge_points`).
     """
 
     frame_index: int
@@ -88,6 +121,15 @@ class FrameClouds:
     valid_paint_pixels: int
     T_base_cam: FloatArray
     skip_reason: str | None = None
+    paint_rgb: NDArray[np.float32] = field(
+        default_factory=lambda: np.zeros((0, 3), dtype=np.float32)
+    )
+    view_centre: FloatArray | None = None
+    other_base: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    other_rgb: NDArray[np.float32] = field(
+        default_factory=lambda: np.zeros((0, 3), dtype=np.float32)
+    )
+    edge_base: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
 
     @property
     def camera_position(self) -> FloatArray:
@@ -120,6 +162,10 @@ def check_perception_config(config: PerceptionConfig) -> None:
     if config.surface_band_m < 0:
         raise PerceptionError(
             f"perception.surface_band_m must be >= 0, got {config.surface_band_m}"
+        )
+    if not config.max_stroke_width_m >= 0:  # NaN fails too
+        raise PerceptionError(
+            f"perception.max_stroke_width_m must be >= 0, got {config.max_stroke_width_m}"
         )
     if not config.min_paint_area_m2 >= 0:  # NaN fails too
         raise PerceptionError(
@@ -225,34 +271,106 @@ def reject_small_blobs(
     """
     if min_area_m2 <= 0 or pixels.size == 0:
         return pixels
-    width = depth_m.shape[1]
-    # scipy's labelling is the costly step (0.65 ms for a whole 640x480 frame), so it runs on
-    # the box the paint spans only (the pixels are sorted by row); the rest is on the paint.
-    row = pixels // width
-    col = pixels - row * width
-    r0, c0 = int(row[0]), int(col.min())
-    box_w = int(col.max()) - c0 + 1
-    local = (row - r0) * box_w + (col - c0)
-    mask = np.zeros((int(row[-1]) - r0 + 1) * box_w, dtype=bool)
-    mask[local] = True
-    labels, n = label(mask.reshape(-1, box_w), structure=_EIGHT)
-    if n <= 1:
+    blobs = _Blobs.of(pixels, depth_m.shape[1])
+    if blobs.n <= 1:
         return pixels
-    blob = labels.reshape(-1)[local]
-    count = np.bincount(blob, minlength=n + 1)
-    footprint = 1.0 / (camera.fx * camera.fy)  # pixel area per metre^2 of depth^2
-    small = count * (max(nearest_m, 1e-3) ** 2 * footprint) < min_area_m2
-    candidate = small[blob]
-    if not candidate.any():
-        return pixels
-    z = np.take(depth_m.reshape(-1), pixels[candidate]).astype(np.float64)
-    which = blob[candidate]
-    valid = np.isfinite(z) & (z > 0.0)
-    z2 = np.bincount(which[valid], weights=z[valid] ** 2, minlength=n + 1)
-    seen = np.bincount(which[valid], minlength=n + 1)
-    area = count * z2 / np.maximum(seen, 1) * footprint
-    drop = small & (seen > 0) & (area < min_area_m2)
-    return pixels[~drop[blob]]
+    return pixels[~blobs.small(pixels, depth_m, camera, min_area_m2, nearest_m)[blobs.blob]]
+
+
+def split_wide_blobs(
+    pixels: NDArray[np.intp],
+    depth_m: NDArray[np.float32],
+    camera: CameraModel,
+    *,
+    max_width_m: float,
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """(pixels of blobs that may be a stroke, pixels of blobs wider than any stroke) of
+    ``pixels`` (ascending flat indices into the (H, W) ``depth_m`` image).
+
+    A marking stroke is a few centimetres wide; paint a hand's width across or more is
+    something else of the paint's colour: a crate's face, a traffic cone. A blob's width is
+    its pixel count over the diagonal of its bounding box (a band's width, whatever its
+    direction; a square's 0.7 side), in metres at its median depth. Blobs without depth are
+    kept. ``max_width_m = 0`` keeps all.
+    """
+    if max_width_m <= 0 or pixels.size == 0:
+        return pixels, pixels[:0]
+    blobs = _Blobs.of(pixels, depth_m.shape[1])
+    wide = blobs.wide(pixels, depth_m, camera, max_width_m)[blobs.blob]
+    return pixels[~wide], pixels[wide]
+
+
+@dataclass(frozen=True, eq=False)
+class _Blobs:
+    """The 8-connected blobs of a set of pixels: ``blob`` (K,) the label of each (1..n),
+    ``count`` (n + 1,) pixels per label, ``boxes`` their bounding slices.
+
+    scipy's labelling is the costly step (0.65 ms for a whole 640x480 frame), so it runs on
+    the box the pixels span only (they are sorted by row), once for both blob tests."""
+
+    blob: NDArray[np.intp]
+    n: int
+    count: NDArray[np.intp]
+    boxes: list[Any]
+
+    @classmethod
+    def of(cls, pixels: NDArray[np.intp], width: int) -> _Blobs:
+        row = pixels // width
+        col = pixels - row * width
+        r0, c0 = int(row[0]), int(col.min())
+        box_w = int(col.max()) - c0 + 1
+        local = (row - r0) * box_w + (col - c0)
+        mask = np.zeros((int(row[-1]) - r0 + 1) * box_w, dtype=bool)
+        mask[local] = True
+        labels, n = label(mask.reshape(-1, box_w), structure=_EIGHT)
+        blob = labels.reshape(-1)[local]
+        return cls(blob, int(n), np.bincount(blob, minlength=n + 1), find_objects(labels))
+
+    def small(
+        self,
+        pixels: NDArray[np.intp],
+        depth_m: NDArray[np.float32],
+        camera: CameraModel,
+        min_area_m2: float,
+        nearest_m: float,
+    ) -> NDArray[np.bool_]:
+        """(n + 1,) the blobs covering less than ``min_area_m2`` (see reject_small_blobs)."""
+        footprint = 1.0 / (camera.fx * camera.fy)  # pixel area per metre^2 of depth^2
+        small = self.count * (max(nearest_m, 1e-3) ** 2 * footprint) < min_area_m2
+        small[0] = False
+        candidate = small[self.blob]
+        if not candidate.any():
+            return np.zeros(self.n + 1, dtype=bool)
+        z = np.take(depth_m.reshape(-1), pixels[candidate]).astype(np.float64)
+        which = self.blob[candidate]
+        valid = np.isfinite(z) & (z > 0.0)
+        z2 = np.bincount(which[valid], weights=z[valid] ** 2, minlength=self.n + 1)
+        seen = np.bincount(which[valid], minlength=self.n + 1)
+        area = self.count * z2 / np.maximum(seen, 1) * footprint
+        return np.asarray(small & (seen > 0) & (area < min_area_m2))
+
+    def wide(
+        self,
+        pixels: NDArray[np.intp],
+        depth_m: NDArray[np.float32],
+        camera: CameraModel,
+        max_width_m: float,
+    ) -> NDArray[np.bool_]:
+        """(n + 1,) the blobs wider than ``max_width_m`` (see split_wide_blobs)."""
+        focal = np.sqrt(camera.fx * camera.fy)
+        wide = np.zeros(self.n + 1, dtype=bool)
+        for k, box in enumerate(self.boxes, start=1):
+            if box is None:
+                continue
+            diagonal = float(np.hypot(box[0].stop - box[0].start, box[1].stop - box[1].start))
+            blob_px = self.count[k] / max(diagonal, 1.0)
+            if blob_px * 3.0 / focal < max_width_m:  # narrower than that even 3 m away
+                continue
+            z = np.take(depth_m.reshape(-1), pixels[self.blob == k][::7]).astype(np.float64)
+            z = z[np.isfinite(z) & (z > 0)]
+            if z.size and blob_px * float(np.median(z)) / focal > max_width_m:
+                wide[k] = True
+        return wide
 
 
 def backproject_pixels(
@@ -285,42 +403,129 @@ def backproject_paint(
     Returns
     -------
     points_base : (K, 3) float64
-        Metres, base frame, one point per usable paint pixel.
+        Metres, base frame, one point per usable paint pixel (of a grid, see sampling_stride).
     pixels : (K,) intp
         Their flat pixel indices.
     paint_pixels : int
         Pixels in the colour range before the depth gate.
     """
-    paint = paint_pixel_indices(frame.color, hsv)
-    solid = _solid_paint(frame, paint, config)
-    usable = usable_depth_pixels(
+    paint, saturation = paint_pixels_with_saturation(frame.color, hsv)
+    own, _ = _split_by_saturation(paint, saturation)
+    strokes, _ = _solid_paint(frame, own, config, max_width_m=config.max_stroke_width_m)
+    points, usable = _backproject(frame, strokes, config)
+    return points, usable, int(paint.size)
+
+
+def split_by_saturation(
+    rgb: NDArray[np.uint8], pixels: NDArray[np.intp]
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """(the paint's own pixels, duller ones) of the filter's ``pixels`` (flat indices into
+    the (H, W, 3) ``rgb``): those below the top split of their saturations' histogram
+    (:func:`~scrapcut_cli.perception.paint.saturation_splits`) are another colour cluster;
+    without a split, all are the paint's."""
+    if pixels.size == 0:
+        return pixels, pixels[:0]
+    c = np.take(np.asarray(rgb).reshape(-1, 3), pixels, axis=0)
+    cmax = c.max(axis=1).astype(np.float64)
+    return _split_by_saturation(pixels, (cmax - c.min(axis=1)) / np.maximum(cmax, 1.0))
+
+
+def _split_by_saturation(
+    pixels: NDArray[np.intp], saturation: NDArray[Any]
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    if pixels.size == 0:
+        return pixels, pixels[:0]
+    # The histogram needs a sample, not every pixel of a 1280x720 frame.
+    splits = saturation_splits(saturation[:: max(1, pixels.size // 20_000)])
+    if not splits:
+        return pixels, pixels[:0]
+    own = saturation >= splits[-1]
+    return pixels[own], pixels[~own]
+
+
+def _backproject_solid(
+    frame: Frame, pixels: NDArray[np.intp], config: PerceptionConfig
+) -> tuple[FloatArray, NDArray[np.intp]]:
+    """Solid-paint filters, depth gate and back-projection of a set of filter pixels."""
+    solid, _ = _solid_paint(frame, pixels, config, max_width_m=0.0)
+    return _backproject(frame, solid, config)
+
+
+def _backproject(
+    frame: Frame, solid: NDArray[np.intp], config: PerceptionConfig
+) -> tuple[FloatArray, NDArray[np.intp]]:
+    """Depth gate and back-projection of solid paint pixels, on a pixel grid fine enough
+    for the voxel (:func:`sampling_stride`)."""
+    stride = sampling_stride(frame, solid, config.voxel_size_m)
+    if stride > 1:
+        width = frame.depth.shape[1]
+        row, col = np.divmod(solid, width)
+        solid = solid[(row % stride == 0) & (col % stride == 0)]
+    usable = _usable(frame, solid, config)
+    return backproject_pixels(frame.camera, frame.depth, usable, frame.T_base_cam), usable
+
+
+def _usable(frame: Frame, pixels: NDArray[np.intp], config: PerceptionConfig) -> NDArray[np.intp]:
+    """:func:`usable_depth_pixels` with the configuration's depth gate."""
+    return usable_depth_pixels(
         frame.depth,
-        solid,
+        pixels,
         min_depth_m=config.min_depth_m,
         max_depth_m=config.max_depth_m,
         flying_pixel_ratio=config.flying_pixel_ratio,
     )
-    return (
-        backproject_pixels(frame.camera, frame.depth, usable, frame.T_base_cam),
-        usable,
-        int(paint.size),
-    )
+
+
+def boundary_pixels(pixels: NDArray[np.intp], shape: tuple[int, ...]) -> NDArray[np.intp]:
+    """The pixels of a set (ascending flat indices into an image of ``shape``) with a
+    4-neighbour outside the set or outside the image."""
+    height, width = int(shape[0]), int(shape[1])
+    if pixels.size == 0:
+        return pixels
+    mask = np.zeros((height + 2, width + 2), dtype=bool)
+    v, u = np.divmod(pixels, width)
+    mask[v + 1, u + 1] = True
+    inside = mask[v, u + 1] & mask[v + 2, u + 1] & mask[v + 1, u] & mask[v + 1, u + 2]
+    return pixels[~inside]
+
+
+def sampling_stride(frame: Frame, pixels: NDArray[np.intp], voxel_m: float) -> int:
+    """Every how many pixels (each way) the paint is back-projected: as many as keep samples
+    at most a third of a voxel apart at the paint's near depth (its 10 % quantile), so each
+    voxel still averages nine or more. At 640x480 and 0.3 m every pixel (0.5 mm), at 1280x720
+    every other one (0.3 mm): the work after the mask no longer grows with the resolution."""
+    if pixels.size == 0:
+        return 1
+    z = np.take(frame.depth.reshape(-1), pixels[:: max(1, pixels.size // 256)])
+    z = z[np.isfinite(z) & (z > 0)]
+    if z.size == 0:
+        return 1
+    focal = min(frame.camera.fx, frame.camera.fy)
+    return max(1, int(voxel_m * focal / (3.0 * float(np.quantile(z, 0.1)))))
 
 
 def _solid_paint(
-    frame: Frame, paint: NDArray[np.intp], config: PerceptionConfig
-) -> NDArray[np.intp]:
-    """The colour filter's pixels without isolated pixels and small blobs (step 1)."""
+    frame: Frame, paint: NDArray[np.intp], config: PerceptionConfig, *, max_width_m: float
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """(solid paint pixels, pixels of blobs wider than ``max_width_m``) of the colour
+    filter's pixels: isolated pixels and small blobs dropped (step 1), one labelling."""
     solid = reject_isolated_pixels(
         paint, frame.depth.shape, min_neighbors=config.min_paint_neighbors
     )
-    return reject_small_blobs(
-        solid,
-        frame.depth,
-        frame.camera,
-        min_area_m2=config.min_paint_area_m2,
-        nearest_m=config.min_depth_m,
-    )
+    empty = solid[:0]
+    if solid.size == 0 or (config.min_paint_area_m2 <= 0 and max_width_m <= 0):
+        return solid, empty
+    blobs = _Blobs.of(solid, frame.depth.shape[1])
+    drop = np.zeros(blobs.n + 1, dtype=bool)
+    if config.min_paint_area_m2 > 0 and blobs.n > 1:
+        drop = blobs.small(
+            solid, frame.depth, frame.camera, config.min_paint_area_m2, config.min_depth_m
+        )
+    wide = blobs.wide(solid, frame.depth, frame.camera, max_width_m) if max_width_m > 0 else drop
+    if max_width_m <= 0:
+        return solid[~drop[blobs.blob]], empty
+    wide &= ~drop
+    return solid[~(drop | wide)[blobs.blob]], solid[wide[blobs.blob]]
 
 
 def voxel_downsample(points: ArrayLike, voxel_size_m: float) -> FloatArray:
@@ -333,6 +538,24 @@ def voxel_downsample(points: ArrayLike, voxel_size_m: float) -> FloatArray:
     return np.asarray(cloud.voxel_down_sample(voxel_size_m).points, dtype=np.float64)
 
 
+def voxel_downsample_colored(
+    points: ArrayLike, rgb: NDArray[np.uint8], voxel_size_m: float
+) -> tuple[FloatArray, NDArray[np.float32]]:
+    """Centroids (M, 3) and mean sRGB (M, 3) float32 in 0-1 of the points (N, 3) with byte
+    colours ``rgb`` (N, 3) in each occupied voxel of ``voxel_size_m`` (open3d)."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(pts) == 0:
+        return pts.copy(), np.zeros((0, 3), dtype=np.float32)
+    o3 = o3d()
+    cloud = o3.geometry.PointCloud(o3.utility.Vector3dVector(pts))
+    cloud.colors = o3.utility.Vector3dVector(np.asarray(rgb, dtype=np.float64) / 255.0)
+    down = cloud.voxel_down_sample(voxel_size_m)
+    return (
+        np.asarray(down.points, dtype=np.float64),
+        np.asarray(down.colors, dtype=np.float32),
+    )
+
+
 def remove_statistical_outliers(
     points: ArrayLike, *, neighbors: int, std_ratio: float
 ) -> FloatArray:
@@ -342,12 +565,36 @@ def remove_statistical_outliers(
     the cloud's mean by more than ``std_ratio`` standard deviations. ``neighbors = 0`` keeps all.
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    return pts[statistical_inliers(pts, neighbors=neighbors, std_ratio=std_ratio)]
+
+
+def statistical_inliers(points: ArrayLike, *, neighbors: int, std_ratio: float) -> NDArray[np.intp]:
+    """Indices (M,) ascending of the points (N, 3) that
+    :func:`remove_statistical_outliers` keeps."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     if neighbors == 0 or len(pts) <= neighbors:
-        return pts.copy()
+        return np.arange(len(pts), dtype=np.intp)
     o3 = o3d()
     cloud = o3.geometry.PointCloud(o3.utility.Vector3dVector(pts))
     _, kept = cloud.remove_statistical_outlier(nb_neighbors=neighbors, std_ratio=std_ratio)
-    return pts[np.asarray(kept, dtype=np.intp)]
+    return np.asarray(kept, dtype=np.intp)
+
+
+def view_centre(frame: Frame, *, window: float = 0.05) -> FloatArray | None:
+    """Where the optical axis meets the observed surface, metres, base frame (3,): the median
+    depth of the valid pixels in a window (``window`` of the image's size each way) around the
+    principal point, back-projected along the axis; None when the window has no depth."""
+    camera = frame.camera
+    h, w = frame.depth.shape
+    ru, rv = max(1, int(window * w)), max(1, int(window * h))
+    u0 = int(np.clip(round(camera.cx), 0, w - 1))
+    v0 = int(np.clip(round(camera.cy), 0, h - 1))
+    patch = frame.depth[max(v0 - rv, 0) : v0 + rv + 1, max(u0 - ru, 0) : u0 + ru + 1]
+    z = patch[np.isfinite(patch) & (patch > 0)]
+    if z.size == 0:
+        return None
+    T = np.asarray(frame.T_base_cam, dtype=np.float64)
+    return np.asarray(T[:3, 3] + float(np.median(z)) * T[:3, 2])
 
 
 def surface_band(
@@ -383,13 +630,7 @@ def surface_band(
     band = maximum_filter(cells, size=2 * radius + 1, mode="constant") > cells
     bi, bj = np.nonzero(band)
     candidates = (bi * stride + stride // 2) * width + bj * stride + stride // 2
-    usable = usable_depth_pixels(
-        frame.depth,
-        candidates.astype(np.intp),
-        min_depth_m=config.min_depth_m,
-        max_depth_m=config.max_depth_m,
-        flying_pixel_ratio=config.flying_pixel_ratio,
-    )
+    usable = _usable(frame, candidates.astype(np.intp), config)
     points = backproject_pixels(camera, frame.depth, usable, frame.T_base_cam)
     if len(points) == 0:
         return points
@@ -398,6 +639,93 @@ def surface_band(
     coarse = voxel_downsample(paint_base, config.surface_band_m / 4.0)
     distance, _ = cKDTree(coarse).query(points, distance_upper_bound=config.surface_band_m)
     return voxel_downsample(points[np.isfinite(distance)], config.surface_voxel_m)
+
+
+#: How far beyond a paint pixel the depth must go on as a surface for its boundary to be the
+#: stroke's edge, metres (a few pixels at the wrist's distances: past one flying pixel at a
+#: hole's rim, short of the next hole of a mesh).
+EDGE_PROBE_M = 0.002
+#: At most this many pixels are probed (a far view's probe is still a few pixels).
+EDGE_PROBE_MAX_PX = 6
+
+
+def stroke_edge_points(
+    frame: Frame,
+    paint_pixels: NDArray[np.intp],
+    paint_depth_m: float,
+    config: PerceptionConfig,
+    *,
+    stroke_pixels: NDArray[np.intp] | None = None,
+) -> FloatArray:
+    """The stroke's edges seen in one frame: (E, 3) float64, metres, base frame.
+
+    ``paint_pixels`` are the usable paint pixels (ascending flat indices; valid, non-flying
+    depth); ``stroke_pixels`` all pixels of the stroke's colour (default: the same), with or
+    without usable depth: a paint pixel whose depth was dropped (beside a hole's flying
+    pixels, say) is still paint, not the metal beyond the stroke. For each usable paint pixel
+    and each of its 4-neighbours outside the stroke, the pixels
+    beyond it in that direction are probed for ``EDGE_PROBE_M`` at ``paint_depth_m`` (1 to
+    ``EDGE_PROBE_MAX_PX`` pixels): every one must be outside the paint, have depth within the
+    gate and continue
+    the surface (each step, and the whole run, within ``flying_pixel_ratio × depth`` of the
+    paint pixel's: the flying-pixel test's tolerance). Then the neighbour is metal that stayed
+    unpainted and the boundary is the stroke's edge: the midpoint of the paint pixel's and the
+    neighbour's points. A neighbour without depth, far behind (a hole's background), or a
+    flying pixel at a rim is no edge: what lies beyond the paint is unknown there. The points
+    are averaged on a voxel grid of half ``voxel_size_m``.
+    """
+    height, width = frame.depth.shape
+    if paint_pixels.size == 0:
+        return np.zeros((0, 3))
+    flat = frame.depth.reshape(-1)
+    mask = np.zeros(height * width, dtype=bool)
+    mask[paint_pixels if stroke_pixels is None else stroke_pixels] = True
+    focal = max(frame.camera.fx, frame.camera.fy)
+    probe = int(
+        np.clip(np.ceil(EDGE_PROBE_M * focal / max(paint_depth_m, 1e-3)), 1, EDGE_PROBE_MAX_PX)
+    )
+    v, u = np.divmod(paint_pixels, width)
+    z0 = np.take(flat, paint_pixels).astype(np.float64)
+    tolerance = config.flying_pixel_ratio * z0
+    inner: list[NDArray[np.intp]] = []
+    outer: list[NDArray[np.intp]] = []
+    for dv, du in ((0, 1), (0, -1), (1, 0), (-1, 0)):
+        step = dv * width + du
+        # Only the stroke's boundary pixels in this direction are probed (a few per cent of
+        # the paint), with room for the whole probe inside the image.
+        room = (
+            (u + probe * du >= 0)
+            & (u + probe * du < width)
+            & (v + probe * dv >= 0)
+            & (v + probe * dv < height)
+        )
+        at = np.flatnonzero(room)
+        at = at[~np.take(mask, paint_pixels[at] + step)]
+        start = paint_pixels[at]
+        z_start = z0[at]
+        limit = tolerance[at]
+        ok = np.ones(len(at), dtype=bool)
+        previous = z_start
+        for k in range(1, probe + 1):
+            if not ok.any():
+                break
+            pixel = start + k * step
+            ok &= ~np.take(mask, pixel)  # a gap of a pixel or two inside the paint is no edge
+            z = np.take(flat, pixel).astype(np.float64)
+            with np.errstate(invalid="ignore"):
+                ok &= (z >= config.min_depth_m) & (z <= config.max_depth_m)  # NaN fails
+                ok &= np.abs(z - previous) <= limit
+                ok &= np.abs(z - z_start) <= limit
+            previous = z
+        inner.append(start[ok])
+        outer.append(start[ok] + step)
+    p = np.concatenate(inner)
+    if p.size == 0:
+        return np.zeros((0, 3))
+    q = np.concatenate(outer)
+    a = backproject_pixels(frame.camera, frame.depth, p, frame.T_base_cam)
+    b = backproject_pixels(frame.camera, frame.depth, q, frame.T_base_cam)
+    return voxel_downsample(0.5 * (a + b), 0.5 * config.voxel_size_m)
 
 
 # --------------------------------------------------------------------------- the recipe
@@ -423,13 +751,26 @@ def process_frame(frame: Frame, hsv: HsvRange, config: PerceptionConfig) -> Fram
     check_perception_config(config)
     T = np.asarray(frame.T_base_cam, dtype=np.float64)
     empty = np.zeros((0, 3))
+    centre = view_centre(frame)
 
     def skipped(reason: str, paint_pixels: int, valid: int) -> FrameClouds:
         return FrameClouds(
-            frame.index, frame.stamp_ns, empty, empty, paint_pixels, valid, T, reason
+            frame.index,
+            frame.stamp_ns,
+            empty,
+            empty,
+            paint_pixels,
+            valid,
+            T,
+            reason,
+            view_centre=centre,
         )
 
-    points, pixels, paint_pixels = backproject_paint(frame, hsv, config)
+    filtered, saturation = paint_pixels_with_saturation(frame.color, hsv)
+    own, duller = _split_by_saturation(filtered, saturation)
+    strokes, wide = _solid_paint(frame, own, config, max_width_m=config.max_stroke_width_m)
+    points, pixels = _backproject(frame, strokes, config)
+    paint_pixels = int(filtered.size)
     if paint_pixels == 0:
         return skipped(SKIP_NO_PAINT, 0, 0)
     if paint_pixels > config.max_paint_share * frame.color.shape[0] * frame.color.shape[1]:
@@ -438,12 +779,19 @@ def process_frame(frame: Frame, hsv: HsvRange, config: PerceptionConfig) -> Fram
         # Scattered specks (rust lifted into the range by noise, overspray) and paint without
         # usable depth need different remedies; telling them apart costs a second filter on
         # skipped frames only.
-        solid = _solid_paint(frame, paint_pixel_indices(frame.color, hsv), config)
+        if strokes.size == 0 and wide.size:
+            return skipped(SKIP_PAINT_TOO_WIDE, paint_pixels, 0)
+        solid, _ = _solid_paint(frame, filtered, config, max_width_m=0.0)
         return skipped(SKIP_NO_VALID_DEPTH if solid.size else SKIP_SCATTERED_PAINT, paint_pixels, 0)
-    paint = remove_statistical_outliers(
-        voxel_downsample(points, config.voxel_size_m),
-        neighbors=config.sor_neighbors,
-        std_ratio=config.sor_std_ratio,
+    paint, paint_rgb = _thin(frame, points, pixels, config)
+    # The other paint (duller colour clusters, blobs too wide for a stroke), to be reported:
+    # noise dropped, downsampled; no outlier removal.
+    solid_other = np.union1d(
+        reject_isolated_pixels(duller, frame.depth.shape, min_neighbors=config.min_paint_neighbors),
+        wide,
+    )
+    other, other_rgb = _thin(
+        frame, *_backproject(frame, solid_other, config), config, outliers=False
     )
     if len(paint) < max(config.min_paint_points, 1):
         return skipped(SKIP_TOO_LITTLE_PAINT, paint_pixels, len(pixels))
@@ -451,7 +799,45 @@ def process_frame(frame: Frame, hsv: HsvRange, config: PerceptionConfig) -> Fram
     depth = frame.depth.reshape(-1)[pixels[:: max(1, len(pixels) // 512)]]
     paint_depth = float(np.percentile(depth, 25))
     surface = surface_band(frame, pixels, paint, paint_depth, config)
-    return FrameClouds(frame.index, frame.stamp_ns, paint, surface, paint_pixels, len(pixels), T)
+    # Edges are probed from every boundary pixel of the stroke, not only from the sampled ones.
+    edges = stroke_edge_points(
+        frame,
+        _usable(frame, boundary_pixels(strokes, frame.depth.shape), config),
+        paint_depth,
+        config,
+        stroke_pixels=strokes,
+    )
+    return FrameClouds(
+        frame.index,
+        frame.stamp_ns,
+        paint,
+        surface,
+        paint_pixels,
+        len(pixels),
+        T,
+        paint_rgb=paint_rgb,
+        view_centre=centre,
+        other_base=other,
+        other_rgb=other_rgb,
+        edge_base=edges,
+    )
+
+
+def _thin(
+    frame: Frame,
+    points: FloatArray,
+    pixels: NDArray[np.intp],
+    config: PerceptionConfig,
+    *,
+    outliers: bool = True,
+) -> tuple[FloatArray, NDArray[np.float32]]:
+    """Voxel downsampling (with the pixels' mean colour) and statistical outlier removal."""
+    colours = np.take(np.asarray(frame.color).reshape(-1, 3), pixels, axis=0)
+    down, down_rgb = voxel_downsample_colored(points, colours, config.voxel_size_m)
+    if not outliers:
+        return down, down_rgb
+    kept = statistical_inliers(down, neighbors=config.sor_neighbors, std_ratio=config.sor_std_ratio)
+    return down[kept], down_rgb[kept]
 
 
 # --------------------------------------------------------------------------- counting frames
@@ -516,6 +902,11 @@ class PerceptionTally:
             hints.append("check the depth range (--min-depth-mm/--max-depth-mm)")
         if self.skip_reasons[SKIP_TOO_LITTLE_PAINT]:
             hints.append("lower --min-paint-points")
+        if self.skip_reasons[SKIP_PAINT_TOO_WIDE]:
+            hints.append(
+                "the paint's colour lies only in blobs wider than a stroke (a crate, a cone, a "
+                "wall): raise perception.max_stroke_width_m (--config) if the line is that wide"
+            )
         if self.skip_reasons[SKIP_PAINT_FILLS_IMAGE]:
             hints.append(
                 "the colour range covers most of the image, not a stroke (a paint-coloured "

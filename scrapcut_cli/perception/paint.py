@@ -9,10 +9,11 @@ pinks), saturation and value in 0–1 (HSV of sRGB bytes / 255, as OpenCV / matp
 them).
 
 Why saturation matters: rusty steel is orange-brown, within the hue range of orange marking
-paint. Fluorescent marking paints are strongly saturated (S > 0.8 when lit); rust, mill scale
-and bare steel are dull (S about 0.25–0.6, V below about 0.6). Shading from a light near the
-camera scales R, G and B together, which lowers V but keeps S, so the thresholds below are low
-on value (shadowed paint is still paint) and high on saturation (rust is not).
+paint. Fluorescent marking paints are strongly saturated (S > 0.85 when lit); mill scale and
+bare steel are dull, and most rust too (S about 0.25–0.6), but iron oxide reaches S ~0.75 (V
+below about 0.6). Shading from a light near the camera scales R, G and B together, which lowers
+V but keeps S, so the thresholds below are low on value (shadowed paint is still paint) and
+high on saturation (most rust is not; the rest is another saturation cluster, see below).
 
 | preset | nominal sRGB | hue range (deg) | S min | V min |
 |--------|--------------|-----------------|-------|-------|
@@ -22,9 +23,12 @@ on value (shadowed paint is still paint) and high on saturation (rust is not).
 | green  | 40, 200, 60  | 85 – 165        | 0.45  | 0.20  |
 | blue   | 20, 90, 230  | 190 – 250       | 0.50  | 0.20  |
 
-The nominal sRGB is the colour of the paint under full white light; the simulator paints with
-it. Numbers chosen from typical fluorescent marking-paint swatches and checked against the
-simulator's rust palette (``sim`` keeps rust at S <= 0.60), see ``tests/test_perception_paint.py``.
+The nominal sRGB is the colour of the paint under full white light; the simulator's cans spray
+near it. Numbers chosen from typical fluorescent marking-paint swatches. A range cannot tell
+fresh paint from iron-oxide rust or a faded old mark of the same hue at S 0.65-0.8: the frame's
+saturation clusters (:func:`saturation_splits`, used by ``perception.cloud``) and line selection
+(``perception.candidates``) do; ``--paint auto`` (``perception.auto``) estimates a range that
+fits the paint's own cluster.
 """
 
 from __future__ import annotations
@@ -32,12 +36,16 @@ from __future__ import annotations
 import functools
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.ndimage import gaussian_filter1d
 
 from scrapcut_cli.config import PaintConfig
 from scrapcut_cli.errors import PerceptionError
+
+FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -80,8 +88,11 @@ class PaintPreset:
     hsv: HsvRange
 
 
-#: The paint looked for when neither the user nor the recording names one.
+#: The paint a recording-free configuration means when it names none (``resolve_paint``).
 DEFAULT_PAINT = "orange"
+#: ``--paint auto``: estimate the range from the recording's images (``perception.auto``), the
+#: default for a recording that names no paint.
+AUTO = "auto"
 
 PAINT_PRESETS: dict[str, PaintPreset] = {
     p.name: p
@@ -109,10 +120,15 @@ def resolve_paint(config: PaintConfig) -> HsvRange:
             ) from None
         return HsvRange(h1, h2, s, v, "custom")
     name = DEFAULT_PAINT if config.preset is None else config.preset
+    if name == AUTO:
+        raise PerceptionError(
+            "--paint auto estimates the colour from a recording's images; here give a preset "
+            f"({', '.join(PAINT_PRESETS)}) or --hsv H1,H2,S,V"
+        )
     preset = PAINT_PRESETS.get(name)
     if preset is None:
         raise PerceptionError(
-            f"unknown paint preset {name!r}; presets: {', '.join(PAINT_PRESETS)} "
+            f"unknown paint preset {name!r}; presets: {', '.join(PAINT_PRESETS)}, auto "
             "(or give --hsv H1,H2,S,V)"
         )
     return preset.hsv
@@ -120,16 +136,19 @@ def resolve_paint(config: PaintConfig) -> HsvRange:
 
 def resolve_recording_paint(
     config: PaintConfig, metadata: Mapping[str, Mapping[str, str]] | None = None
-) -> HsvRange:
-    """The paint to look for in a recording.
+) -> HsvRange | None:
+    """The paint to look for in a recording; None: estimate it from its images (``auto``).
 
     An explicit choice (``--paint``/``--hsv`` or a ``[paint]`` table) wins; otherwise a
-    simulator recording's own paint (``metadata["scrapcut"]["paint"]``), else orange.
+    simulator recording's own paint (``metadata["scrapcut"]["paint"]``), else ``auto``.
     """
-    if config.hsv is None and config.preset is None and metadata:
-        recorded = metadata.get("scrapcut", {}).get("paint")
+    if config.hsv is None and config.preset is None:
+        recorded = (metadata or {}).get("scrapcut", {}).get("paint")
         if recorded in PAINT_PRESETS:
             return PAINT_PRESETS[str(recorded)].hsv
+        return None
+    if config.hsv is None and config.preset == AUTO:
+        return None
     return resolve_paint(config)
 
 
@@ -195,8 +214,11 @@ def hue_in_range(hue_deg: ArrayLike, hsv: HsvRange) -> NDArray[np.bool_]:
     return np.asarray((h >= hsv.hue_min_deg) & (h <= hsv.hue_max_deg))
 
 
-def paint_pixel_indices(rgb: NDArray[np.uint8], hsv: HsvRange) -> NDArray[np.intp]:
-    """Flat indices (K,) into ``H * W`` of the pixels whose colour lies in ``hsv``, ascending.
+def paint_pixels_with_saturation(
+    rgb: NDArray[np.uint8], hsv: HsvRange
+) -> tuple[NDArray[np.intp], NDArray[np.float32]]:
+    """Flat indices (K,) into ``H * W`` of the pixels whose colour lies in ``hsv``, ascending,
+    and their saturation (K,) float32 (chroma over the max channel, as the test saw it).
 
     The hot path of the filter, written by hand because a full-image HSV conversion in numpy
     (or OpenCV-style per-pixel code) costs ~15 ms at 640×480. Saturation and value are tested
@@ -222,7 +244,7 @@ def paint_pixel_indices(rgb: NDArray[np.uint8], hsv: HsvRange) -> NDArray[np.int
     candidates = np.flatnonzero(chroma >= table.min())
     candidates = candidates[np.take(chroma, candidates) >= table.take(np.take(cmax, candidates))]
     if candidates.size == 0 or (hsv.hue_min_deg == 0.0 and hsv.hue_max_deg == 360.0):
-        return candidates
+        return candidates, _saturation(np.take(chroma, candidates), np.take(cmax, candidates))
     # np.take is several times faster than fancy indexing for these gathers.
     c = np.take(flat, candidates, axis=0).astype(np.int32)
     cr, cg, cb = c[:, 0], c[:, 1], c[:, 2]
@@ -237,7 +259,19 @@ def paint_pixel_indices(rgb: NDArray[np.uint8], hsv: HsvRange) -> NDArray[np.int
     keep = (above | below) if hsv.wraps else (above & below)
     if hsv.sat_min == 0.0:  # greys can pass S; their hue is 0 by definition
         keep = np.where(ch > 0, keep, bool(hue_in_range(0.0, hsv)))
-    return candidates[keep]
+    return candidates[keep], _saturation(ch[keep], cm[keep])
+
+
+def _saturation(chroma: NDArray[Any], cmax: NDArray[Any]) -> NDArray[np.float32]:
+    return np.asarray(
+        chroma.astype(np.float32) / np.maximum(cmax.astype(np.float32), np.float32(1.0))
+    )
+
+
+def paint_pixel_indices(rgb: NDArray[np.uint8], hsv: HsvRange) -> NDArray[np.intp]:
+    """Flat indices (K,) into ``H * W`` of the pixels whose colour lies in ``hsv``, ascending
+    (:func:`paint_pixels_with_saturation` without the saturations)."""
+    return paint_pixels_with_saturation(rgb, hsv)[0]
 
 
 def paint_mask(rgb: NDArray[np.uint8], hsv: HsvRange) -> NDArray[np.bool_]:
@@ -261,6 +295,96 @@ def paint_mask(rgb: NDArray[np.uint8], hsv: HsvRange) -> NDArray[np.bool_]:
     mask = np.zeros(image.shape[0] * image.shape[1], dtype=bool)
     mask[paint_pixel_indices(image, hsv)] = True
     return mask.reshape(image.shape[:2])
+
+
+# --------------------------------------------------------------------------- colour clusters
+
+#: Saturation histogram: bins, smoothing (bins), least distance between two modes it splits,
+#: least share of the voxels a mode holds, how deep the dip must be (share of the lower mode).
+_BINS = 100
+_SMOOTH_BINS = 1.5
+_MIN_MODE_GAP = 0.08
+_MIN_MODE_SHARE = 0.01
+_MIN_MODE_VOXELS = 30
+_DIP = 0.5
+
+
+def saturation_splits(sat: FloatArray) -> list[float]:
+    """Saturations (ascending) where the voxels' saturation histogram dips between two modes
+    (each with ``_MIN_MODE_SHARE`` of the voxels, ``_MIN_MODE_GAP`` apart, the dip below
+    ``_DIP`` of the lower mode's height); empty when it has one mode."""
+    s = sat[np.isfinite(sat)]
+    if len(s) < 2 * _MIN_MODE_VOXELS:
+        return []
+    counts, edges = np.histogram(s, bins=_BINS, range=(0.0, 1.0))
+    density = gaussian_filter1d(counts.astype(np.float64), _SMOOTH_BINS, mode="constant")
+    centres = 0.5 * (edges[:-1] + edges[1:])
+    peaks = _peaks(density)
+    least = max(_MIN_MODE_SHARE * len(s), _MIN_MODE_VOXELS)
+    # From the top mode down: a lower mode is split off only when both sides hold enough
+    # voxels, the modes lie far enough apart and a deep enough dip separates them; otherwise
+    # the two are one, represented by the stronger.
+    splits: list[int] = []
+    upper = peaks[-1] if peaks else 0
+    for k in reversed(peaks[:-1]):
+        dip = k + int(np.argmin(density[k : upper + 1]))
+        ceiling = splits[0] if splits else _BINS
+        if (
+            centres[upper] - centres[k] >= _MIN_MODE_GAP
+            and density[dip] <= _DIP * min(density[k], density[upper])
+            and counts[:dip].sum() >= least
+            and counts[dip:ceiling].sum() >= least
+        ):
+            splits.insert(0, dip)
+            upper = k
+        elif density[k] > density[upper]:
+            upper = k
+    return [float(edges[k]) for k in splits]
+
+
+def _peaks(density: FloatArray) -> list[int]:
+    """Bins (ascending) of the local maxima of a histogram's density, its ends included
+    (saturation 1 is a mode's place when a channel is 0: fluorescent orange, yellow)."""
+    padded = np.concatenate([[-1.0], density, [-1.0]])
+    centre = padded[1:-1]
+    peak = (centre > 0) & (centre >= padded[:-2]) & (centre > padded[2:])
+    return [int(k) for k in np.flatnonzero(peak)]
+
+
+def paint_core(sat: FloatArray) -> float:
+    """Where the paint's own colour cluster begins among a line candidate's voxel
+    saturations (N,): below its most saturated mode holding ``_CORE_SHARE`` of them (fresh
+    marking paint is the most saturated thing on a piece) by ``_CORE_SPREAD`` times the
+    spread above that mode (at least ``_CORE_GAP``); NaN when the colours are unknown."""
+    s = sat[np.isfinite(sat)]
+    if len(s) < _MIN_MODE_VOXELS:
+        return float("nan")
+    counts, edges = np.histogram(s, bins=_BINS, range=(0.0, 1.0))
+    density = gaussian_filter1d(counts.astype(np.float64), _SMOOTH_BINS, mode="constant")
+    peaks = _peaks(density)
+    # A mode's mass: the voxels within the half-height span around it.
+    least = max(_CORE_SHARE * len(s), _MIN_MODE_VOXELS)
+    top = int(np.argmax(density))
+    for k in reversed(peaks):
+        lo = hi = k
+        while lo > 0 and density[lo - 1] >= 0.5 * density[k]:
+            lo -= 1
+        while hi < _BINS - 1 and density[hi + 1] >= 0.5 * density[k]:
+            hi += 1
+        if counts[lo : hi + 1].sum() >= least:
+            top = k
+            break
+    mode = 0.5 * (edges[top] + edges[top + 1])
+    above = s[s >= mode]
+    spread = float(np.sqrt(np.mean((above - mode) ** 2))) if len(above) else 0.0
+    return float(mode - max(_CORE_SPREAD * spread, _CORE_GAP))
+
+
+#: The paint's core: within this many spreads (at least this much) below its mode, the most
+#: saturated mode with at least this share of the line candidate's voxels.
+_CORE_SPREAD = 4.0
+_CORE_GAP = 0.03
+_CORE_SHARE = 0.1
 
 
 class HueHistogram:

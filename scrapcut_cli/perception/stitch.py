@@ -119,7 +119,9 @@ class _VoxelMap:
     """Running-mean points on a world-aligned voxel grid, keyed by packed voxel index.
 
     Keys are kept sorted, so a frame is merged with one ``searchsorted`` and one ``insert``
-    (vectorised, no Python loop over points) and the output order is deterministic.
+    (vectorised, no Python loop over points) and the output order is deterministic. Each voxel
+    also counts the frames that put a point in it (``frames``): a voxel's points are averaged,
+    its frames say how often it was seen.
     """
 
     def __init__(self, voxel_size_m: float, *, option: str) -> None:
@@ -128,7 +130,9 @@ class _VoxelMap:
         self.keys = np.zeros(0, dtype=np.int64)
         self.sums = np.zeros((0, 3))
         self.counts = np.zeros(0, dtype=np.int64)
+        self.frames = np.zeros(0, dtype=np.int64)
         self.viewpoints = np.zeros((0, 3))
+        self.rgb_sums = np.zeros((0, 3))  # NaN once a point of unknown colour fell in
 
     def __len__(self) -> int:
         return int(self.keys.size)
@@ -137,8 +141,14 @@ class _VoxelMap:
     def points(self) -> FloatArray:
         return np.asarray(self.sums / self.counts[:, None])
 
-    def add(self, points: FloatArray, viewpoint: FloatArray) -> int:
-        """Merge points (N, 3); new voxels remember ``viewpoint`` (3,). Returns voxels added."""
+    @property
+    def rgb(self) -> FloatArray:
+        """Mean sRGB (N, 3) in 0-1 of what fell in each voxel (NaN: unknown)."""
+        return np.asarray(self.rgb_sums / self.counts[:, None])
+
+    def add(self, points: FloatArray, viewpoint: FloatArray, rgb: ArrayLike | None = None) -> int:
+        """Merge points (N, 3) with sRGB colours ``rgb`` (N, 3) in 0-1 (None: unknown); new
+        voxels remember ``viewpoint`` (3,). Returns voxels added."""
         if len(points) == 0:
             return 0
         try:
@@ -154,16 +164,28 @@ class _VoxelMap:
         sums = np.column_stack(
             [np.bincount(inverse, weights=points[:, i], minlength=keys.size) for i in range(3)]
         )
+        colours = (
+            np.full((len(points), 3), np.nan)
+            if rgb is None or len(rgb) != len(points)  # type: ignore[arg-type]
+            else np.asarray(rgb, dtype=np.float64)
+        )
+        rgb_sums = np.column_stack(
+            [np.bincount(inverse, weights=colours[:, i], minlength=keys.size) for i in range(3)]
+        )
         pos = np.searchsorted(self.keys, keys)
         found = pos < self.keys.size
         found[found] = self.keys[pos[found]] == keys[found]
         self.sums[pos[found]] += sums[found]
+        self.rgb_sums[pos[found]] += rgb_sums[found]
         self.counts[pos[found]] += counts[found]
+        self.frames[pos[found]] += 1
         new = ~found
         at = pos[new]
         self.keys = np.insert(self.keys, at, keys[new])
         self.sums = np.insert(self.sums, at, sums[new], axis=0)
+        self.rgb_sums = np.insert(self.rgb_sums, at, rgb_sums[new], axis=0)
         self.counts = np.insert(self.counts, at, counts[new])
+        self.frames = np.insert(self.frames, at, 1)
         self.viewpoints = np.insert(
             self.viewpoints, at, np.broadcast_to(viewpoint, (int(new.sum()), 3)), axis=0
         )
@@ -213,6 +235,11 @@ class Stitcher:
         Camera centre of the first frame that saw each paint voxel.
     surface_points, surface_viewpoints : (M, 3) float64
         The same for the non-paint surface band (normals point towards the viewpoint).
+    edge_points : (E, 3) float64
+        The stroke's edges (paint next to metal, ``perception.cloud.stroke_edge_points``), one
+        point per occupied paint-sized voxel.
+    paint_frames, surface_frames, edge_frames : (N,), (M,), (E,) int64
+        How many frames put a point in each voxel.
     size : int
         Number of occupied paint voxels: Algorithm 1's size(k).
     steps : list of StitchStep
@@ -225,6 +252,10 @@ class Stitcher:
         self.perception = perception
         self._paint = _VoxelMap(config.voxel_size_m, option="--stitch-voxel-mm")
         self._surface = _VoxelMap(perception.surface_voxel_m, option="--surface-voxel-mm")
+        # The filter's duller colour clusters (rust, old marks): kept apart from the paint and
+        # its size(k), for line selection to report.
+        self._other = _VoxelMap(config.voxel_size_m, option="--stitch-voxel-mm")
+        self._edges = _VoxelMap(config.voxel_size_m, option="--stitch-voxel-mm")
         self.steps: list[StitchStep] = []
 
     @property
@@ -240,12 +271,43 @@ class Stitcher:
         return self._paint.viewpoints.copy()
 
     @property
+    def paint_rgb(self) -> FloatArray:
+        """Mean sRGB (N, 3) in 0-1 of each paint voxel (NaN where unknown)."""
+        return self._paint.rgb
+
+    @property
+    def other_points(self) -> FloatArray:
+        """Voxels (P, 3) of the filter's duller colour clusters, metres, base frame."""
+        return self._other.points
+
+    @property
+    def other_rgb(self) -> FloatArray:
+        """Their mean sRGB (P, 3) in 0-1."""
+        return self._other.rgb
+
+    @property
     def surface_points(self) -> FloatArray:
         return self._surface.points
 
     @property
     def surface_viewpoints(self) -> FloatArray:
         return self._surface.viewpoints.copy()
+
+    @property
+    def edge_points(self) -> FloatArray:
+        return self._edges.points
+
+    @property
+    def paint_frames(self) -> NDArray[np.int64]:
+        return self._paint.frames.copy()
+
+    @property
+    def surface_frames(self) -> NDArray[np.int64]:
+        return self._surface.frames.copy()
+
+    @property
+    def edge_frames(self) -> NDArray[np.int64]:
+        return self._edges.frames.copy()
 
     def add(self, clouds: FrameClouds, *, T_base_cam: ArrayLike | None = None) -> StitchStep:
         """Merge one frame's clouds; returns its step (size, growth, ICP outcome).
@@ -258,16 +320,23 @@ class Stitcher:
         before = self.size
         icp: IcpOutcome | None = None
         paint, surface = clouds.paint_base, clouds.surface_base
+        other, edges = clouds.other_base, clouds.edge_base
         if clouds.skip_reason is None and len(paint):
             if self.config.icp:
                 icp = self._refine(paint)
                 if icp.accepted:
                     paint = transform_points(icp.T_correction, paint)
                     surface = transform_points(icp.T_correction, surface)
+                    if len(other):
+                        other = transform_points(icp.T_correction, other)
+                    if len(edges):
+                        edges = transform_points(icp.T_correction, edges)
                     pose = icp.T_correction @ pose
             viewpoint = np.asarray(pose[:3, 3], dtype=np.float64)
-            self._paint.add(paint, viewpoint)
+            self._paint.add(paint, viewpoint, clouds.paint_rgb)
             self._surface.add(surface, viewpoint)
+            self._other.add(other, viewpoint, clouds.other_rgb)
+            self._edges.add(edges, viewpoint)
         step = StitchStep(
             k=k,
             frame_index=clouds.frame_index,
@@ -283,6 +352,17 @@ class Stitcher:
         )
         self.steps.append(step)
         return step
+
+    def kept_clouds(self) -> dict[str, Any]:
+        """The edges and per-voxel frame counts, as :class:`StitchResult` keywords."""
+        return {
+            "edge_points": self.edge_points,
+            "paint_frames": self.paint_frames,
+            "surface_frames": self.surface_frames,
+            "edge_frames": self.edge_frames,
+            "other_frames": self._other.frames.copy(),
+            "other_viewpoints": self._other.viewpoints.copy(),
+        }
 
     # ------------------------------------------------------------------ ICP
 
@@ -381,6 +461,21 @@ class StitchResult:
         Metres, base frame (see :class:`Stitcher`).
     surface_points, surface_viewpoints : (M, 3) float64
         Metres, base frame.
+    paint_rgb : (N, 3) float64
+        Mean sRGB in 0-1 of each paint point's pixels (NaN where unknown).
+    other_points, other_rgb : (P, 3) float64
+        The filter's duller colour clusters (rust, old marks), stitched apart from the paint.
+    view_centres : (K, 3) float64
+        Where each frame's optical axis met the surface, in frame order, metres, base frame
+        (1 m along the axis when the image centre has no depth): the track the scan followed.
+    view_origins : (K, 3) float64
+        The camera centres of those frames: ``views`` pairs them into sight lines.
+    edge_points : (E, 3) float64
+        The stroke's edges, metres, base frame (see :class:`Stitcher`).
+    paint_frames, surface_frames, edge_frames, other_frames : (N,), (M,), (E,), (P,) int64
+        Frames that saw each point's voxel (empty when not kept).
+    other_viewpoints : (P, 3) float64
+        The camera centre that first saw each of the duller clusters' voxels.
     steps : list of StitchStep
         One per frame, in order.
     tally : PerceptionTally
@@ -399,6 +494,55 @@ class StitchResult:
     tally: PerceptionTally
     hsv: HsvRange
     base_frame: str = ""
+    paint_rgb: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    view_centres: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    other_points: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    other_rgb: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    view_origins: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    edge_points: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    paint_frames: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    surface_frames: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    edge_frames: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    other_frames: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    other_viewpoints: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+
+    @property
+    def views(self) -> FloatArray:
+        """(K, 2, 3) sight lines (camera centre, view centre) of the frames, base frame."""
+        if len(self.view_origins) != len(self.view_centres):
+            return np.asarray(self.view_centres).reshape(-1, 1, 3).repeat(2, axis=1)
+        return np.stack([self.view_origins, self.view_centres], axis=1)
+
+    @property
+    def all_paint_points(self) -> FloatArray:
+        """The paint and the duller clusters, (N + P, 3): what line selection splits."""
+        return np.vstack([self.paint_points, self.other_points])
+
+    @property
+    def all_paint_rgb(self) -> FloatArray:
+        """Their colours (N + P, 3), in the same order."""
+        return np.vstack([self._rgb(self.paint_rgb, self.paint_points), self.other_rgb])
+
+    @property
+    def all_paint_frames(self) -> NDArray[np.int64]:
+        """Frames that saw each of those points (N + P,); empty when not kept for all."""
+        if len(self.paint_frames) != len(self.paint_points) or len(self.other_frames) != len(
+            self.other_points
+        ):
+            return np.zeros(0, dtype=np.int64)
+        return np.concatenate([self.paint_frames, self.other_frames])
+
+    @property
+    def all_paint_viewpoints(self) -> FloatArray:
+        """The camera centre that first saw each of those points (N + P, 3); empty when not
+        kept for all."""
+        if len(self.other_viewpoints) != len(self.other_points):
+            return np.zeros((0, 3))
+        return np.vstack([self.paint_viewpoints, self.other_viewpoints])
+
+    @staticmethod
+    def _rgb(rgb: FloatArray, points: FloatArray) -> FloatArray:
+        return rgb if len(rgb) == len(points) else np.full((len(points), 3), np.nan)
 
     @property
     def size(self) -> int:
@@ -455,10 +599,15 @@ def stitch_recording(
     stitcher = Stitcher(config.stitch, perception=config.perception)
     tally = PerceptionTally(hsv)
     base_frame = ""
+    centres: list[FloatArray] = []
+    origins: list[FloatArray] = []
     for frame in frames:
         base_frame = frame.base_frame
         clouds = process_frame(frame, hsv, config.perception)
         tally.add(clouds, frame.color)
+        origins.append(clouds.T_base_cam[:3, 3].copy())
+        centre = clouds.view_centre
+        centres.append(centre if centre is not None else origins[-1] + clouds.T_base_cam[:3, 2])
         step = stitcher.add(clouds, T_base_cam=frame.T_base_cam)
         if progress is not None:
             progress(step)
@@ -472,4 +621,10 @@ def stitch_recording(
         tally=tally,
         hsv=hsv,
         base_frame=base_frame,
+        paint_rgb=stitcher.paint_rgb,
+        view_centres=np.asarray(centres, dtype=np.float64).reshape(-1, 3),
+        view_origins=np.asarray(origins, dtype=np.float64).reshape(-1, 3),
+        other_points=stitcher.other_points,
+        other_rgb=stitcher.other_rgb,
+        **stitcher.kept_clouds(),
     )

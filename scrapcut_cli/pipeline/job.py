@@ -83,6 +83,9 @@ class Job:
     retry_leaf_size_m : float, optional
         A skeleton that breaks at its leaf size is fitted once more at this one (the paper's
         basket); the result's note says so.
+    line : int
+        Which of the picked lines to fit (``selection.pick = "all"`` picks several; 0: the
+        first, the one the scan follows by default).
     """
 
     recording: Path
@@ -98,6 +101,7 @@ class Job:
     source_name: str | None = None
     object_name: str | None = None
     retry_leaf_size_m: float | None = None
+    line: int = 0
 
     def exports(self) -> list[Path]:
         """Every file the job writes besides the error report: path file first."""
@@ -244,7 +248,9 @@ class Pipeline:
     def _fit(self, config: ScrapcutConfig) -> FitResult:
         assert self.stitched is not None
         job = self.job
-        return fit_stitched(self.stitched, method=job.method, config=config, speeds=self.speeds)
+        return fit_stitched(
+            self.stitched, method=job.method, config=config, speeds=self.speeds, line=job.line
+        )
 
     def _make_path_file(self) -> None:
         """The ``scrapcut.path/v1`` dictionary, naming its error report when there will be one."""
@@ -315,7 +321,7 @@ class Pipeline:
                 frame_id=fit.frame_id,
                 stamp_ns=fit.start_ns,
                 reference=None if row is None else row.reference_points,
-                paint_points=fit.stitch.paint_points,
+                paint_points=fit.line_points,
                 surface_points=fit.stitch.surface_points,
                 error_scale_m=fit.config.evaluation.coverage_threshold_m,
             )

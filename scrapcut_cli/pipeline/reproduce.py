@@ -72,8 +72,11 @@ if TYPE_CHECKING:
     from scrapcut_cli.pipeline.fit import FitResult, StitchedRecording
     from scrapcut_cli.sim.recorder import RecordResult
 
-#: The paper's five simulated objects (Table I), and the real-robot shapes ``all`` adds.
+#: The paper's five simulated objects (Table I), the pieces Table I adds to them by default (a
+#: perforated plate: holes across the stroke, issue 14), and the real-robot shapes ``all`` adds.
 PAPER_OBJECTS = ("cylinder", "i_beam", "t_piece", "basket", "air_chamber")
+EXTRA_OBJECTS = ("perforated_plate",)
+DEFAULT_OBJECTS = (*PAPER_OBJECTS, *EXTRA_OBJECTS)
 REAL_ROBOT_OBJECTS = ("slanted", "planar_box")
 #: The scan modes reproduce runs: explore (Algorithm 1, Table I) or sweep (oracle views).
 MODES = (ScanMode.SWEEP.value, ScanMode.EXPLORE.value)
@@ -177,14 +180,15 @@ class ReproduceResult:
 
 
 def resolve_objects(names: Sequence[str]) -> tuple[str, ...]:
-    """Object names from the command line: ``all`` = the paper's five + the real-robot shapes;
-    empty = the paper's five. Unknown names raise PipelineError listing the known ones."""
+    """Object names from the command line: ``all`` = the default pieces + the real-robot
+    shapes; empty = the default pieces (the paper's five and the perforated plate). Unknown
+    names raise PipelineError listing the known ones."""
     from scrapcut_cli.sim.objects import list_objects
 
     known = [name for name, _ in list_objects()]
     wanted: list[str] = []
-    for name in names or PAPER_OBJECTS:
-        expanded = [*PAPER_OBJECTS, *REAL_ROBOT_OBJECTS] if name == "all" else [name]
+    for name in names or DEFAULT_OBJECTS:
+        expanded = [*DEFAULT_OBJECTS, *REAL_ROBOT_OBJECTS] if name == "all" else [name]
         for n in expanded:
             if n not in known:
                 raise PipelineError(f"unknown object {n!r}; known: {', '.join(known)}, all")

@@ -30,7 +30,7 @@ from scrapcut_cli.recording.reader import (
     Recording,
     open_recording,
 )
-from scrapcut_cli.recording.writer import McapWriter
+from scrapcut_cli.recording.writer import McapWriter, is_foreign_directory
 
 FORMATS = ("mcap", "ros1", "ros2")
 ROS2_STORAGES = ("mcap", "sqlite3")
@@ -94,7 +94,7 @@ def convert_recording(
         raise RecordingError(f"output {dst_path} is the input; choose another -o")
     if fmt == "ros2" and dst_path.is_file():
         raise RecordingError(f"{dst_path} is a file; a ROS 2 bag is a directory")
-    if fmt == "ros2" and _is_foreign_directory(dst_path):
+    if fmt == "ros2" and is_foreign_directory(dst_path):
         # The bag replaces the directory whole: never delete a folder of other files.
         raise RecordingError(
             f"{dst_path} is a directory that is not a ROS 2 bag; choose a new -o (an existing "
@@ -126,11 +126,6 @@ def _kept_topics(rec: Recording, wanted: Sequence[str] | None) -> list[str]:
             f"no topic {', '.join(missing)} in {rec.path}; it has {', '.join(present)}"
         )
     return [t for t in present if t in set(wanted)]
-
-
-def _is_foreign_directory(path: Path) -> bool:
-    """True for an existing, non-empty directory that is not a ROS 2 bag."""
-    return path.is_dir() and not (path / "metadata.yaml").is_file() and any(path.iterdir())
 
 
 class _Translator:

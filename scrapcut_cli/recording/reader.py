@@ -22,7 +22,7 @@ import json
 import os
 import stat
 import tempfile
-from collections.abc import Generator, Iterable, Iterator, Sequence
+from collections.abc import Collection, Generator, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
@@ -855,10 +855,11 @@ class Recording:
             )
         return mount
 
-    def frames(self) -> Iterator[Frame]:
+    def frames(self, only: Collection[int] | None = None) -> Iterator[Frame]:
         """Stream exactly the planned frames, index 0 .. usable-1, in recording order.
 
-        Memory stays bounded: an image is held only until its partner arrives.
+        ``only``: the indices of the frames wanted (the others are not decoded). Memory stays
+        bounded: an image is held only until its partner arrives.
         """
         plan = self.plan()
         if plan.usable == 0:
@@ -892,6 +893,9 @@ class Recording:
                 depth_users[di] -= 1
                 if depth_users[di] == 0:
                     del pending_depth[di]
+                if only is not None and next_frame not in only:
+                    next_frame += 1
+                    continue
                 yield Frame(
                     index=next_frame,
                     stamp_ns=int(plan.stamps_ns[next_frame]),

@@ -4,7 +4,8 @@ Numbers and their sources
 -------------------------
 Intrinsics
     Colour stream 640×480, fx ≈ fy ≈ 615 px: the colour sensor sees 69.4° × 42.5° in its 16:9
-    modes (Intel D400 datasheet, doc. 337029); a 4:3 stream keeps the 42.5° vertical field,
+    modes (Intel D400 datasheet, doc. 337029): at 1280×720 fx = 640 / tan 34.7° ≈ 923 px and
+    fy = 360 / tan 21.25° ≈ 923 px; a 4:3 stream keeps the 42.5° vertical field,
     fy = 240 / tan 21.25° ≈ 615 px, and is 55° wide. A typical factory calibration, principal
     point a few pixels off centre.
     realsense-ros publishes ``plumb_bob`` with zero coefficients for the D435i colour stream.
@@ -42,6 +43,15 @@ Clock offset and frames while moving (``yard``)
 Lighting variation (``yard``)
     Per view: gain 0.75–1.15, a warm/cool tint of ±4 % on red and blue, and a linear brightness
     ramp of ±15 % across the image (sun, clouds and shadows of an outdoor yard; assumed).
+Glare holes (glints)
+    Where a mirror-like spot reflects the light into the lens (specular highlight above 0.5),
+    it mirrors the projected IR pattern away too: depth is missing there with chance 0.7
+    (assumed; the D400 white paper lists specular surfaces among the causes of holes).
+Scene (``yard``; ``sim.scene``)
+    Presets also say what lies in the scene besides the piece: the can's colour varies around
+    the paint preset (all but ``ideal``); ``yard`` adds an old faded mark near the line,
+    distractors of paint-like colour on the floor (a crate, a traffic cone, a glove) and glints
+    on the steel.
 """
 
 from __future__ import annotations
@@ -67,9 +77,25 @@ OPTICAL_FRAME = "camera_color_optical_frame"
 
 
 def d435i_color_camera(width: int = 640, height: int = 480) -> CameraModel:
-    """The D435i colour camera (depth is aligned to it) at ``width`` × ``height`` pixels."""
+    """The D435i colour camera (depth is aligned to it) at ``width`` × ``height`` pixels.
+
+    16:9 modes (1280×720, realsense-ros 4.x's default, 848×480, 640×360...) see 69.4° × 42.5°
+    with square pixels (fx ≈ fy ≈ 923 px at 1280×720); 4:3 modes keep the vertical field and
+    crop the sides (615 px at 640×480). Other aspect ratios stretch the 4:3 calibration.
+    """
     if width <= 0 or height <= 0:
         raise SimError(f"camera resolution must be positive, got {width}x{height}")
+    wide = CameraModel(
+        width=1280,
+        height=720,
+        fx=923.4,
+        fy=922.9,
+        cx=643.1,
+        cy=357.6,
+        distortion_model="plumb_bob",
+        distortion=(0.0, 0.0, 0.0, 0.0, 0.0),
+        frame_id=OPTICAL_FRAME,
+    )
     base = CameraModel(
         width=640,
         height=480,
@@ -81,6 +107,8 @@ def d435i_color_camera(width: int = 640, height: int = 480) -> CameraModel:
         distortion=(0.0, 0.0, 0.0, 0.0, 0.0),
         frame_id=OPTICAL_FRAME,
     )
+    if width * 9 == height * 16:
+        return wide if (width, height) == (1280, 720) else wide.scaled(width, height)
     return base if (width, height) == (640, 480) else base.scaled(width, height)
 
 
@@ -124,6 +152,14 @@ class NoisePreset:
     motion_frames_hz: float = 0.0  # images per second recorded while the arm moves
     lighting_variation: bool = False
     overspray: str = "light"
+    glare_hole_level: float = 0.5
+    glare_hole_chance: float = 0.7
+    # What lies in the scene (sim.scene): the can's colour spread, old marks, distractors,
+    # glints. SimConfig's fields of the same names override these when given.
+    paint_variation: bool = True
+    faded_marks: int = 0
+    distractors: tuple[str, ...] = ()
+    glints: bool = False
 
     def depth_sigma_m(self, z_m: ArrayLike) -> FloatArray:
         """RMS depth error (same shape as ``z_m``) in metres: z²·s/(f·B)."""
@@ -143,6 +179,8 @@ NOISE_PRESETS: dict[str, NoisePreset] = {
         flying_chance=0.0,
         color_sigma_dn=0.0,
         overspray="none",
+        glare_hole_chance=0.0,
+        paint_variation=False,
     ),
     "d435i": NoisePreset("d435i"),
     "yard": NoisePreset(
@@ -154,6 +192,9 @@ NOISE_PRESETS: dict[str, NoisePreset] = {
         motion_frames_hz=6.0,
         lighting_variation=True,
         overspray="heavy",
+        faded_marks=1,
+        distractors=("box", "cone", "glove"),
+        glints=True,
     ),
 }
 
@@ -213,6 +254,8 @@ def simulate_depth(
     cos_incidence: ArrayLike,
     preset: NoisePreset,
     rng: np.random.Generator,
+    *,
+    glare: ArrayLike | None = None,
 ) -> NDArray[np.float32]:
     """A D435i-like depth image (H, W) float32 metres, NaN where invalid, before quantisation.
 
@@ -226,6 +269,8 @@ def simulate_depth(
         Which imperfections to apply.
     rng : numpy.random.Generator
         Source of all random draws (the same generator state gives the same image).
+    glare : (H, W) float, optional
+        Specular highlight per pixel (``RenderedView.glare``): holes where it is strong.
     """
     z = np.array(depth_m, dtype=np.float64)
     if z.ndim != 2:
@@ -250,6 +295,11 @@ def simulate_depth(
         invalid |= draws[2] < hole_chance
     if preset.dropout > 0:
         invalid |= rng.random(z.shape, dtype=np.float32) < preset.dropout
+    if glare is not None and preset.glare_hole_chance > 0:
+        glaring = np.flatnonzero(np.asarray(glare).reshape(-1) > preset.glare_hole_level)
+        if glaring.size:  # no draw without glare: recordings without glints keep their bytes
+            holes = glaring[rng.random(glaring.size) < preset.glare_hole_chance]
+            invalid.reshape(-1)[holes] = True
     out[invalid] = np.nan
     return out.astype(np.float32)
 

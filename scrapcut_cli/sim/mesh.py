@@ -248,3 +248,198 @@ def floor_mesh(size_m: float = 6.0, *, z: float = 0.0) -> TriMesh:
     h = 0.5 * size_m
     vertices = np.array([[-h, -h, z], [h, -h, z], [h, h, z], [-h, h, z]])
     return TriMesh(vertices, np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int64))
+
+
+# --------------------------------------------------------------------------- perforated sheet
+
+
+@dataclass(frozen=True)
+class Hole:
+    """A convex hole through a sheet, centred at ``centre`` (x, y) metres of the sheet's plane.
+
+    ``shape`` is ``"round"`` (diameter ``size[0]``) or ``"rect"`` (``size`` = (along x,
+    along y)), rotated by ``angle_rad`` about its centre (rectangles only).
+    """
+
+    centre: tuple[float, float]
+    shape: str
+    size: tuple[float, float]
+    angle_rad: float = 0.0
+
+    def outline(self, max_step: float) -> FloatArray:
+        """The hole's boundary (K, 2), counter-clockwise, vertices at most ``max_step`` apart;
+        a rectangle keeps its corners exactly."""
+        c = np.asarray(self.centre, dtype=np.float64)
+        if self.shape == "round":
+            r = 0.5 * self.size[0]
+            k = max(int(np.ceil(2.0 * np.pi * r / max_step)), 12)
+            a = np.linspace(0.0, 2.0 * np.pi, k, endpoint=False)
+            return np.asarray(c + r * np.column_stack([np.cos(a), np.sin(a)]))
+        if self.shape != "rect":
+            raise ValueError(f"unknown hole shape {self.shape!r}; known: round, rect")
+        hx, hy = 0.5 * self.size[0], 0.5 * self.size[1]
+        corners = np.array([[hx, hy], [-hx, hy], [-hx, -hy], [hx, -hy]])
+        # Start at the middle of the +x side so the outline runs counter-clockwise from angle 0.
+        pts = [np.array([[hx, 0.0]])]
+        for a, b in itertools.pairwise([np.array([hx, 0.0]), *corners, np.array([hx, 0.0])]):
+            n = max(int(np.ceil(np.linalg.norm(b - a) / max_step)), 1)
+            t = np.linspace(0.0, 1.0, n + 1)[1:, None]
+            pts.append(a + t * (b - a))
+        local = np.concatenate(pts)[:-1]
+        cs, sn = np.cos(self.angle_rad), np.sin(self.angle_rad)
+        return np.asarray(c + local @ np.array([[cs, sn], [-sn, cs]]))
+
+
+def perforated_sheet(
+    size: tuple[float, float],
+    cell: float,
+    holes: Sequence[Hole],
+    *,
+    thickness: float,
+    max_step: float = 0.001,
+) -> TriMesh:
+    """A flat sheet with convex holes: top at z = 0, bottom at z = -``thickness``.
+
+    The sheet spans x in [-size[0]/2, size[0]/2] and y likewise, split into square cells of side
+    ``cell`` (which must divide both sides); each cell holds at most one hole, strictly inside
+    it. A cell's top face is the ring between its boundary (sampled every ``max_step``, the
+    same vertices as its neighbours': no T-junctions, so the ray caster sees no cracks) and
+    its hole, triangulated by walking both outlines in order of angle about the hole's centre.
+    Hole and sheet walls are quads with their own vertices (sharp edges). Raises ValueError
+    when a hole does not fit its cell or the triangulation would fold.
+    """
+    sx, sy = size
+    nx, ny = round(sx / cell), round(sy / cell)
+    if nx < 1 or ny < 1 or abs(nx * cell - sx) > 1e-9 or abs(ny * cell - sy) > 1e-9:
+        raise ValueError(f"cell {cell} m must divide the sheet {sx} x {sy} m")
+    per_side = max(int(np.ceil(cell / max_step)), 1)
+    x0, y0 = -0.5 * sx, -0.5 * sy
+    by_cell: dict[tuple[int, int], Hole] = {}
+    for hole in holes:
+        key = (
+            int(np.floor((hole.centre[0] - x0) / cell)),
+            int(np.floor((hole.centre[1] - y0) / cell)),
+        )
+        if key in by_cell:
+            raise ValueError(f"two holes in the cell at {key}")
+        by_cell[key] = hole
+    top: list[TriMesh] = []
+    walls: list[TriMesh] = []
+    for i in range(nx):
+        for j in range(ny):
+            lo = np.array([x0 + i * cell, y0 + j * cell])
+            ring = _cell_outline(lo, cell, per_side)
+            found = by_cell.get((i, j))
+            if found is None:
+                # A fan from the cell's centre over the same boundary vertices as a holed
+                # neighbour's (four corners alone would leave T-junctions on its sides).
+                k = len(ring)
+                fan = np.vstack([ring, lo + 0.5 * cell])
+                tri = np.column_stack([np.arange(k), (np.arange(k) + 1) % k, np.full(k, k)])
+                top.append(TriMesh(np.column_stack([fan, np.zeros(k + 1)]), tri.astype(np.int64)))
+                continue
+            inner = found.outline(max_step)
+            if np.any(inner <= lo + 1e-4) or np.any(inner >= lo + cell - 1e-4):
+                raise ValueError(f"hole at {found.centre} does not fit inside its {cell} m cell")
+            top.append(_ring_face(ring, inner, np.asarray(found.centre, dtype=np.float64)))
+            walls.append(_wall(inner[::-1], thickness))  # seen from inside the hole
+    outline = np.concatenate(
+        [
+            np.column_stack(
+                [np.linspace(x0, -x0, nx * per_side + 1)[:-1], np.full(nx * per_side, y0)]
+            ),
+            np.column_stack(
+                [np.full(ny * per_side, -x0), np.linspace(y0, -y0, ny * per_side + 1)[:-1]]
+            ),
+            np.column_stack(
+                [np.linspace(-x0, x0, nx * per_side + 1)[:-1], np.full(nx * per_side, -y0)]
+            ),
+            np.column_stack(
+                [np.full(ny * per_side, x0), np.linspace(-y0, y0, ny * per_side + 1)[:-1]]
+            ),
+        ]
+    )
+    walls.append(_wall(outline, thickness))
+    faces_top = merge(top)
+    bottom = TriMesh(
+        faces_top.vertices - np.array([0.0, 0.0, thickness]), faces_top.faces[:, [0, 2, 1]]
+    )
+    return merge([faces_top, bottom, *walls])
+
+
+def _cell_outline(lo: FloatArray, cell: float, per_side: int) -> FloatArray:
+    """A square cell's boundary (4·per_side, 2), counter-clockwise from its lower-left corner;
+    every cell samples its sides at the same positions, so neighbours share vertices."""
+    t = np.linspace(0.0, cell, per_side + 1)[:-1]
+    zero = np.zeros_like(t)
+    return np.concatenate(
+        [
+            lo + np.column_stack([t, zero]),
+            lo + np.column_stack([zero + cell, t]),
+            lo + np.column_stack([cell - t, zero + cell]),
+            lo + np.column_stack([zero, cell - t]),
+        ]
+    )
+
+
+def _ring_face(outer: FloatArray, inner: FloatArray, centre: FloatArray) -> TriMesh:
+    """Triangles (at z = 0, facing +z) between two counter-clockwise closed outlines (K, 2) and
+    (L, 2) around ``centre``: both walked in order of angle, each step advancing the outline
+    whose next vertex comes first."""
+
+    def angles(points: FloatArray) -> FloatArray:
+        d = points - centre
+        return np.asarray(np.mod(np.arctan2(d[:, 1], d[:, 0]), 2.0 * np.pi))
+
+    ao, ai = angles(outer), angles(inner)
+    o0, i0 = int(np.argmin(ao)), int(np.argmin(ai))
+    outer, ao = np.roll(outer, -o0, axis=0), np.roll(ao, -o0)
+    inner, ai = np.roll(inner, -i0, axis=0), np.roll(ai, -i0)
+    # Close both walks at angle 2π with their first vertex again.
+    ao = np.append(ao, ao[0] + 2.0 * np.pi)
+    ai = np.append(ai, ai[0] + 2.0 * np.pi)
+    k, m = len(outer), len(inner)
+    vertices = np.vstack([outer, inner])
+    tris = []
+    a, b = 0, 0
+    while a < k or b < m:
+        if b >= m or (a < k and ao[a + 1] <= ai[b + 1]):
+            tris.append((a % k, (a + 1) % k, k + b % m))
+            a += 1
+        else:
+            tris.append((a % k, k + (b + 1) % m, k + b % m))
+            b += 1
+    faces = np.asarray(tris, dtype=np.int64)
+    v = vertices[faces]
+    signed = 0.5 * (
+        (v[:, 1, 0] - v[:, 0, 0]) * (v[:, 2, 1] - v[:, 0, 1])
+        - (v[:, 1, 1] - v[:, 0, 1]) * (v[:, 2, 0] - v[:, 0, 0])
+    )
+    expected = _polygon_area(outer) - _polygon_area(inner)
+    if signed.min() <= 0.0 or abs(signed.sum() - expected) > 1e-9 * max(expected, 1e-12) + 1e-12:
+        raise ValueError(f"the ring around the hole at {tuple(centre)} cannot be triangulated")
+    return TriMesh(np.column_stack([vertices, np.zeros(len(vertices))]), faces)
+
+
+def _polygon_area(points: FloatArray) -> float:
+    x, y = points[:, 0], points[:, 1]
+    return float(0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def _wall(outline: FloatArray, thickness: float) -> TriMesh:
+    """Vertical quads from z = 0 down to -``thickness`` along a closed outline (K, 2); they
+    face right of the walking direction (outwards for a counter-clockwise sheet outline)."""
+    k = len(outline)
+    nxt = np.roll(outline, -1, axis=0)
+    quads = np.stack(
+        [
+            np.column_stack([outline, np.zeros(k)]),
+            np.column_stack([outline, np.full(k, -thickness)]),
+            np.column_stack([nxt, np.full(k, -thickness)]),
+            np.column_stack([nxt, np.zeros(k)]),
+        ],
+        axis=1,
+    ).reshape(-1, 3)
+    base = 4 * np.arange(k)[:, None]
+    faces = np.concatenate([base + np.array([0, 1, 2]), base + np.array([0, 2, 3])])
+    return TriMesh(quads, faces.astype(np.int64))

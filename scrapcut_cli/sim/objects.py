@@ -33,12 +33,14 @@ from numpy.typing import ArrayLike, NDArray
 from scrapcut_cli.errors import SimError
 from scrapcut_cli.geometry import cumulative_length, polyline_length
 from scrapcut_cli.sim.mesh import (
+    Hole,
     TriMesh,
     box,
     cylinder_between,
     extrude,
     frame_from_axis,
     merge,
+    perforated_sheet,
     revolve,
 )
 from scrapcut_cli.sim.surface import MetalFinish
@@ -75,6 +77,9 @@ class ScrapObject:
     closed : bool
         The line is a loop: ``reference`` runs once around it and does not repeat its first
         point (the last point joins the first).
+    painted : TriMesh or None
+        The surface the line was sprayed across when it is not the mesh (the basket's
+        envelope over its wires), base frame; other marks are sprayed across it too.
     """
 
     name: str
@@ -87,6 +92,7 @@ class ScrapObject:
     T_base_object: FloatArray
     seed: int = 0
     closed: bool = False
+    painted: TriMesh | None = None
 
     @property
     def mesh(self) -> TriMesh:
@@ -99,6 +105,11 @@ class ScrapObject:
         if self.closed:
             return np.asarray(np.vstack([self.reference, self.reference[:1]]))
         return self.reference
+
+    @property
+    def painted_surface(self) -> TriMesh:
+        """The surface paint is sprayed across: ``painted``, else the mesh."""
+        return self.painted if self.painted is not None else self.mesh
 
     @property
     def reference_length_m(self) -> float:
@@ -313,6 +324,48 @@ def _basket() -> _Built:
     )
 
 
+def _perforated_plate() -> _Built:
+    """A perforated steel plate (440 × 320 × 3 mm) on two rails, 125 mm above the floor.
+
+    Punched in a 40 mm grid: slots 14 × 30 mm in the half nearer the robot's left (rows
+    alternately across and along x), a plain 40 mm strip in the middle, round holes of 24
+    and 14 mm in the other half. The line sweeps across it in an S, so holes cross the
+    stroke at every lateral offset: some take one edge, some its middle, the wide ones all of
+    it. Through a hole the camera sees the floor 125 mm below (a depth jump with flying pixels
+    at the hole's rim); the line is drawn on the plate's plane, over the holes too.
+    """
+    sx, sy, cell, thickness, height = 0.44, 0.32, 0.04, 0.003, 0.125
+    holes: list[Hole] = []
+    for i in range(round(sx / cell)):
+        for j in range(round(sy / cell)):
+            centre = (-0.5 * sx + (i + 0.5) * cell, -0.5 * sy + (j + 0.5) * cell)
+            if i < 5:
+                size = (0.014, 0.030) if j % 2 == 0 else (0.030, 0.014)
+                holes.append(Hole(centre, "rect", size))
+            elif i > 5:
+                d = 0.024 if (i + j) % 2 == 0 else 0.014
+                holes.append(Hole(centre, "round", (d, d)))
+    sheet = perforated_sheet((sx, sy), cell, holes, thickness=thickness).transformed(
+        frame_from_axis((0.0, 0.0, height), (0.0, 0.0, 1.0), (1.0, 0.0, 0.0))
+    )
+    rails = [
+        box((-0.5 * sx + 0.01, y - 0.012, 0.0), (0.5 * sx - 0.01, y + 0.012, height - thickness))
+        for y in (-0.5 * sy + 0.012, 0.5 * sy - 0.012)
+    ]
+    t = _samples(0.42)[1:]
+    x = -0.19 + 0.38 * t
+    y = -0.005 + 0.075 * (2.0 * t - 1.0) + 0.03 * np.sin(2.0 * np.pi * t)
+    reference = np.column_stack([x, y, np.full_like(t, height)])
+    return _Built(
+        merge([sheet, *rails]),
+        reference,
+        MetalFinish(rust_fraction=0.30),
+        painted_surface=box(
+            (-0.5 * sx, -0.5 * sy, height - thickness), (0.5 * sx, 0.5 * sy, height)
+        ),
+    )
+
+
 def _air_chamber() -> _Built:
     """A 260 mm air receiver lying along y with dished ends and a sharp V groove near one end.
 
@@ -450,6 +503,10 @@ _CATALOGUE: dict[str, tuple[str, Callable[[], _Built]]] = {
         "tank with a sharp groove near one end; the line dips through it",
         _air_chamber,
     ),
+    "perforated_plate": (
+        "perforated plate on rails; slots and round holes cross the stroke",
+        _perforated_plate,
+    ),
     "slanted": ("two faces at a sharp ridge; the line crosses it (self-occlusion)", _slanted),
     "planar_box": ("box; the line crosses the top and turns down a side face", _planar_box),
     "pipe_ring": (
@@ -515,4 +572,5 @@ def make_object(name: str, *, seed: int = 0, placement: ArrayLike | None = None)
         T_base_object=T,
         seed=int(seed),
         closed=built.closed,
+        painted=painted if built.painted_surface is not None else None,
     )

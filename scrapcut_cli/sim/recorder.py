@@ -109,6 +109,7 @@ from scrapcut_cli.sim.robot import (
     World,
     joint_names,
 )
+from scrapcut_cli.sim.scene import YardScene
 from scrapcut_cli.sim.surface import OVERSPRAY_PRESETS, PaintStroke
 from scrapcut_cli.sim.visibility import LineVisibility
 
@@ -123,6 +124,9 @@ EXPLORATION_TOPIC = "/scrapcut/exploration"
 
 MODES = choice_names(ScanMode)
 DEPTH_ENCODINGS = ("16UC1", "32FC1")
+COLOR_ENCODINGS = ("rgb8", "jpeg")
+#: realsense-ros publishes JPEG colour through image_transport's compressed plugin here.
+COMPRESSED_SUFFIX = "/compressed"
 
 #: Simulated clock at the start of every recording: 2023-11-14 22:13:20 UTC.
 START_NS = 1_700_000_000 * 1_000_000_000
@@ -196,13 +200,32 @@ def validate(config: SimConfig) -> None:
         raise SimError(f"unknown mode {config.mode!r}; modes: {', '.join(MODES)}")
     if config.paint not in PAINT_PRESETS:
         raise SimError(
-            f"unknown paint preset {config.paint!r}; presets: {', '.join(PAINT_PRESETS)}"
+            f"unknown paint preset {config.paint!r}; the simulator paints with one of "
+            f"{', '.join(PAINT_PRESETS)} (auto is for reading recordings)"
         )
     if config.depth_encoding not in DEPTH_ENCODINGS:
         raise SimError(
             f"unknown depth encoding {config.depth_encoding!r}; "
             f"encodings: {', '.join(DEPTH_ENCODINGS)}"
         )
+    if config.color_encoding not in COLOR_ENCODINGS:
+        raise SimError(
+            f"unknown colour encoding {config.color_encoding!r}; "
+            f"encodings: {', '.join(COLOR_ENCODINGS)}"
+        )
+    from scrapcut_cli.recording.writer import ROS2_STORAGES
+    from scrapcut_cli.sim.scene import check_distractors
+
+    if config.storage not in ROS2_STORAGES:
+        raise SimError(
+            f"unknown ROS 2 storage {config.storage!r}; storages: {', '.join(ROS2_STORAGES)}"
+        )
+    if config.distractors is not None:
+        if isinstance(config.distractors, str) or not all(
+            isinstance(d, str) for d in config.distractors
+        ):
+            raise SimError(f"sim.distractors must be a list of names, got {config.distractors!r}")
+        check_distractors(tuple(config.distractors))
     checks = [
         (config.width > 0 and config.height > 0, f"resolution {config.width}x{config.height}"),
         (config.stroke_width_m > 0, f"stroke width {config.stroke_width_m} m"),
@@ -213,6 +236,11 @@ def validate(config: SimConfig) -> None:
         (config.frames_per_view >= 1, f"frames per view {config.frames_per_view}"),
         (config.max_views >= 1, f"max views {config.max_views}"),
         (config.max_backoff_m >= 0, f"max back-off {config.max_backoff_m} m"),
+        (1 <= config.jpeg_quality <= 100, f"JPEG quality {config.jpeg_quality} (1-100)"),
+        (
+            config.faded_marks is None or config.faded_marks >= 0,
+            f"faded marks {config.faded_marks}",
+        ),
         (0 < config.speed_scale <= 1, f"speed scale {config.speed_scale} (0-1]"),
         (config.tf_rate_hz > 0, f"tf rate {config.tf_rate_hz} Hz"),
         (0 <= config.min_elevation_deg < 90, f"min elevation {config.min_elevation_deg} deg"),
@@ -232,6 +260,27 @@ def place_object(config: SimConfig) -> ScrapObject:
         config.object,
         seed=config.seed,
         placement=(config.object_x_m, config.object_y_m, config.object_yaw_deg),
+    )
+
+
+def make_scene(config: SimConfig, obj: ScrapObject, preset: NoisePreset) -> YardScene:
+    """What lies in the scene besides the piece: the noise preset's choices, overridden by the
+    configuration's (``paint_variation``, ``faded_marks``, ``distractors``, ``glints``)."""
+    from scrapcut_cli.perception.paint import PAINT_PRESETS
+    from scrapcut_cli.sim.scene import build_scene
+
+    def pick(value: Any, default: Any) -> Any:
+        return default if value is None else value
+
+    return build_scene(
+        obj,
+        paint_rgb=PAINT_PRESETS[config.paint].rgb,
+        stroke_width_m=config.stroke_width_m,
+        paint_variation=bool(pick(config.paint_variation, preset.paint_variation)),
+        faded_marks=int(pick(config.faded_marks, preset.faded_marks)),
+        distractors=tuple(pick(config.distractors, preset.distractors)),
+        glints=bool(pick(config.glints, preset.glints)),
+        seed=config.seed,
     )
 
 
@@ -281,8 +330,6 @@ def record(
     true piece only counts crashes. ``progress(done, total)`` is called after every decided
     view.
     """
-    from scrapcut_cli.perception.paint import PAINT_PRESETS
-    from scrapcut_cli.recording.writer import McapWriter
     from scrapcut_cli.sim.render import SceneRenderer
     from scrapcut_cli.sim.views import PrePlannedPlanner
 
@@ -319,25 +366,34 @@ def record(
         preset.motion_frames_hz if config.motion_frames_hz is None else config.motion_frames_hz
     )
     overspray = OVERSPRAY_PRESETS[preset.overspray]
+    scene = make_scene(config, obj, preset)
     stroke = PaintStroke(
         obj.painted_line,
         width_m=config.stroke_width_m,
-        rgb=PAINT_PRESETS[config.paint].rgb,
+        rgb=scene.can_rgb,
         overspray=overspray,
         seed=config.seed,
     )
-    renderer = SceneRenderer(obj, stroke, seed=config.seed)
+    renderer = SceneRenderer(
+        obj,
+        stroke,
+        seed=config.seed,
+        faded=[mark.stroke for mark in scene.faded],
+        distractors=scene.distractors,
+        glints=scene.glints,
+    )
     limits = RobotLimits(max_backoff_m=config.max_backoff_m)
     observed = ObservedScene() if config.mode == "explore" else None
 
     with (
         PandaSim(
-            obj.mesh,
+            # The true world: the piece and what lies beside it (the planner never sees it).
+            scene.obstacles(obj),
             T_hand_camlink_nominal=T_HAND_CAMLINK,
             T_hand_camlink_true=T_hand_camlink_true,
             limits=limits,
         ) as robot,
-        McapWriter(out_path) as writer,
+        _writer(out_path, config) as writer,
     ):
         session = _Session(
             writer,
@@ -378,6 +434,7 @@ def record(
         if observed is not None:
             params["observed"] = dataclasses.asdict(observed.settings)
         total = int(getattr(active, "total", config.max_views))
+        params["scene"] = scene.describe()
         writer.add_metadata("scrapcut", _metadata(config, params))
         session.start(obj.reference)
         stop_reason = session.run(active, total, progress)
@@ -699,12 +756,15 @@ class _Session:
         for k in range(cfg.frames_per_view):
             stamp = first + round(k * FRAME_PERIOD_S * 1e9) + self.stamp_offset_ns
             rng = _rng(cfg.seed, _STREAM_SENSOR, view, k)
-            depth_m = simulate_depth(rendered.depth, rendered.cos_incidence, self.preset, rng)
+            depth_m = simulate_depth(
+                rendered.depth, rendered.cos_incidence, self.preset, rng, glare=rendered.glare
+            )
             if self.visibility is not None:
                 self.visibility.add(rendered, depth_m)
             color = simulate_color(rendered.color, self.preset, rng)
             depth_msg, depth_read = _encode_depth(depth_m, cfg.depth_encoding)
-            self._write_images(stamp, color, depth_msg)
+            color_msg, color = _encode_color(color, cfg, stamp)
+            self._write_images(stamp, color_msg, depth_msg)
             self.frames += 1
             frame = Frame(
                 index=self.frames - 1,
@@ -744,25 +804,43 @@ class _Session:
         for k, (capture, T_true) in enumerate(zip(captures.tolist(), poses, strict=True)):
             rendered = self.renderer.render(T_true, self.camera, lighting=lighting)
             rng = _rng(cfg.seed, _STREAM_SENSOR, 100_000 + move, k)
-            depth_m = simulate_depth(rendered.depth, rendered.cos_incidence, self.preset, rng)
+            depth_m = simulate_depth(
+                rendered.depth, rendered.cos_incidence, self.preset, rng, glare=rendered.glare
+            )
             if self.visibility is not None:
                 self.visibility.add(rendered, depth_m)  # a reader may stitch these too
             color = simulate_color(rendered.color, self.preset, rng)
             depth_msg, _ = _encode_depth(depth_m, cfg.depth_encoding)
-            self._write_images(capture + self.stamp_offset_ns, color, depth_msg)
+            stamp = capture + self.stamp_offset_ns
+            color_msg, _ = _encode_color(color, cfg, stamp)
+            self._write_images(stamp, color_msg, depth_msg)
             self.frames += 1
             self.moving_frames += 1
 
-    def _write_images(self, stamp: int, color: NDArray[np.uint8], depth: NDArray[Any]) -> None:
+    def _write_images(self, stamp: int, color: Any, depth: NDArray[Any]) -> None:
+        """Colour (an rgb8 array, or a CompressedImage message), depth and camera info."""
         w = self.writer
         camera = self.camera
         log_color = stamp + self._delay_ns(20.0, 40.0)
         log_depth = stamp + self._delay_ns(20.0, 40.0)
         log_info = log_color + self._delay_ns(0.05, 0.5)
-        self._emit(
-            log_color,
-            lambda: w.write_image(COLOR_TOPIC, stamp, OPTICAL_FRAME, color, log_time_ns=log_color),
-        )
+        if isinstance(color, np.ndarray):
+            self._emit(
+                log_color,
+                lambda: w.write_image(
+                    COLOR_TOPIC, stamp, OPTICAL_FRAME, color, log_time_ns=log_color
+                ),
+            )
+        else:
+            self._emit(
+                log_color,
+                lambda: w.write_message(
+                    COLOR_TOPIC + COMPRESSED_SUFFIX,
+                    COMPRESSED_IMAGE,
+                    color,
+                    log_time_ns=log_color,
+                ),
+            )
         self._emit(
             log_depth,
             lambda: w.write_image(DEPTH_TOPIC, stamp, OPTICAL_FRAME, depth, log_time_ns=log_depth),
@@ -823,6 +901,34 @@ def _min_jerk(tau: ArrayLike) -> FloatArray:
     """Minimum-jerk progress 10τ³ − 15τ⁴ + 6τ⁵ (zero speed and acceleration at both ends)."""
     t = np.clip(np.asarray(tau, dtype=np.float64), 0.0, 1.0)
     return np.asarray(t**3 * (10.0 - 15.0 * t + 6.0 * t * t))
+
+
+COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
+
+
+def _encode_color(
+    color: NDArray[np.uint8], config: SimConfig, stamp_ns: int
+) -> tuple[Any, NDArray[np.uint8]]:
+    """(what is written, what a reader decodes from it) for a colour image: the array itself
+    (rgb8), or a JPEG CompressedImage and its decoded pixels (with the JPEG's losses)."""
+    if config.color_encoding != "jpeg":
+        return color, color
+    from scrapcut_cli.recording import messages as m
+
+    msg = m.compressed_image_msg(
+        stamp_ns, OPTICAL_FRAME, color, fmt="jpeg", quality=config.jpeg_quality
+    )
+    return msg, m.decode_color(msg, COMPRESSED_IMAGE)
+
+
+def _writer(path: str | Path, config: SimConfig) -> Any:
+    """The output: MCAP for ``*.mcap``, else a ROS 2 bag directory of ``config.storage``."""
+    from scrapcut_cli.recording.writer import open_writer
+
+    try:
+        return open_writer(path, storage=config.storage)
+    except ValueError as exc:
+        raise SimError(str(exc)) from None
 
 
 def _encode_depth(

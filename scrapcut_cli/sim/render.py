@@ -18,8 +18,9 @@ depth along the optical axis.
 from __future__ import annotations
 
 import functools
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -31,16 +32,24 @@ from scrapcut_cli.sim.objects import ScrapObject
 from scrapcut_cli.sim.surface import (
     AMBIENT,
     LIGHT_OFFSET_CAM,
+    PLASTIC_SHEEN,
+    STEEL_GLINT,
     PaintStroke,
     floor_albedo,
     lambert,
     metal_albedo,
+    shiny_steel,
+    specular,
+    value_noise,
 )
+
+if TYPE_CHECKING:
+    from scrapcut_cli.sim.scene import Distractor
 
 FloatArray = NDArray[np.float64]
 
-#: geometry ids in a render
-MISS, OBJECT, FLOOR = -1, 0, 1
+#: geometry ids in a render; distractors are DISTRACTOR, DISTRACTOR + 1, ...
+MISS, OBJECT, FLOOR, DISTRACTOR = -1, 0, 1, 2
 
 #: colour where a ray hits nothing (dark hall background), sRGB 0–1
 BACKGROUND_RGB = (0.08, 0.08, 0.09)
@@ -59,13 +68,17 @@ class RenderedView:
     color : (H, W, 3) float32
         Shaded sRGB in 0–1.
     geometry : (H, W) int8
-        ``OBJECT``, ``FLOOR`` or ``MISS`` per pixel.
+        ``OBJECT``, ``FLOOR``, ``DISTRACTOR + k`` or ``MISS`` per pixel.
     hit_index : (M,) int64
         Flat pixel index of every hit; the per-hit arrays below follow it.
     hit_points : (M, 3) float64
         Hit points, metres, base frame.
     hit_paint, hit_stroke, hit_rust : (M,) bool
         Paint (stroke or overspray speck), the stroke alone, rust, per hit.
+    hit_faded : (M,) bool
+        Old marks (not covered by the fresh paint), per hit.
+    glare : (H, W) float32
+        Specular highlight added to each pixel (0 where none): the depth model's holes.
 
     The full-image masks and points (``paint``, ``stroke``, ``rust``, ``points_base``) are
     built on request: the recorder does not need them.
@@ -80,6 +93,8 @@ class RenderedView:
     hit_paint: NDArray[np.bool_]
     hit_stroke: NDArray[np.bool_]
     hit_rust: NDArray[np.bool_]
+    hit_faded: NDArray[np.bool_]
+    glare: NDArray[np.float32]
 
     def _full(self, values: NDArray[np.bool_]) -> NDArray[np.bool_]:
         out = np.zeros(self.geometry.size, dtype=bool)
@@ -102,6 +117,11 @@ class RenderedView:
         return self._full(self.hit_rust)
 
     @property
+    def faded(self) -> NDArray[np.bool_]:
+        """(H, W) pixels showing an old mark."""
+        return self._full(self.hit_faded)
+
+    @property
     def points_base(self) -> FloatArray:
         """(H, W, 3) hit points, metres, base frame; NaN on misses."""
         out = np.full((self.geometry.size, 3), np.nan)
@@ -110,7 +130,8 @@ class RenderedView:
 
 
 class SceneRenderer:
-    """The piece (with its paint) and the floor, ready to be rendered from any camera pose.
+    """The piece (with its paint), the floor and what lies on it, ready to be rendered from any
+    camera pose.
 
     Parameters
     ----------
@@ -122,6 +143,12 @@ class SceneRenderer:
         Default: a 6 m square at z = 0.
     seed : int
         Seeds the floor's texture (the piece's rust uses ``obj.seed``).
+    faded : sequence of PaintStroke
+        Old marks on the piece, under the fresh paint.
+    distractors : sequence of Distractor
+        Things of paint-like colour on the floor (``sim.scene``).
+    glints : bool
+        Mirror-like spots on the bare steel and a sheen on the distractors.
     """
 
     def __init__(
@@ -131,15 +158,24 @@ class SceneRenderer:
         *,
         floor: TriMesh | None = None,
         seed: int = 0,
+        faded: Sequence[PaintStroke] = (),
+        distractors: Sequence[Distractor] = (),
+        glints: bool = False,
     ) -> None:
         from scrapcut_cli._open3d import o3d as _o3d
 
         self._o3d = _o3d()
         self.object = obj
         self.stroke = stroke
+        self.faded = tuple(faded)
+        self.distractors = tuple(distractors)
+        self.glints = bool(glints)
         self.seed = int(seed)
         floor = floor if floor is not None else floor_mesh()
-        self._meshes = (obj.mesh, floor)
+        self._meshes = (obj.mesh, floor, *(d.mesh for d in self.distractors))
+        self._distractor_rgb = (
+            np.array([d.rgb for d in self.distractors], dtype=np.float64).reshape(-1, 3) / 255.0
+        )
         # Per triangle, its three corners' vertex normals (F, 3, 3) float32, for interpolation.
         self._corner_normals = tuple(
             m.vertex_normals().astype(np.float32)[m.faces] for m in self._meshes
@@ -217,34 +253,63 @@ class SceneRenderer:
         todo[source] = True
         albedo = np.empty((idx.size, 3))
         rust = np.zeros(idx.size, dtype=bool)
+        shiny = np.zeros(idx.size, dtype=bool)
         on_object = np.flatnonzero(todo & (gid_hit == OBJECT))
         on_floor = np.flatnonzero(todo & (gid_hit == FLOOR))
+        on_distractor = np.flatnonzero(todo & (gid_hit >= DISTRACTOR))
         if on_object.size:
             albedo[on_object], rust[on_object] = metal_albedo(
                 p_hit[on_object], self.object.material, self.object.seed
             )
+            if self.glints:
+                shiny[on_object] = shiny_steel(p_hit[on_object], self.object.seed)
         if on_floor.size:
             albedo[on_floor] = floor_albedo(p_hit[on_floor], self.seed)
+        if on_distractor.size:
+            # Safety-coloured plastic, dulled by dirt in patches of a few centimetres.
+            dirt = 0.88 + 0.12 * value_noise(p_hit[on_distractor], 0.03, self.seed + 31)
+            colour = self._distractor_rgb[gid_hit[on_distractor] - DISTRACTOR]
+            albedo[on_distractor] = colour * dirt[:, None]
         albedo = albedo[source]
         rust = rust[source]
+        shiny = shiny[source]
         stroke = np.zeros(idx.size, dtype=bool)
         speck = np.zeros(idx.size, dtype=bool)
+        faded = np.zeros(idx.size, dtype=bool)
         objects = np.flatnonzero(gid_hit == OBJECT)
         if objects.size:
-            stroke[objects], speck[objects] = self.stroke.coverage(p_hit[objects])
+            # Old marks first, the fresh stroke over them; a coat lets its substrate show
+            # through by (1 - opacity).
+            for mark in self.faded:
+                layer = mark.layer(p_hit[objects])
+                self._coat(albedo, objects, layer.opacity, mark, p_hit)
+                faded[objects] |= layer.paint
+            layer = self.stroke.layer(p_hit[objects])
+            self._coat(albedo, objects, layer.opacity, self.stroke, p_hit)
+            stroke[objects], speck[objects] = layer.stroke, layer.speck
         paint = stroke | speck
-        albedo[paint] = self.stroke.rgb
-        rust &= ~paint
+        faded &= ~paint
+        rust &= ~(paint | faded)
+        shiny &= ~(paint | faded | rust)
 
         light = origin + T[:3, :3] @ np.asarray(LIGHT_OFFSET_CAM)
         shade = lambert(n_hit, p_hit, light, ambient=AMBIENT).astype(np.float32)
         flat = np.empty((h * w, 3), dtype=np.float32)
         flat[:] = BACKGROUND_RGB
-        flat[idx] = albedo.astype(np.float32) * shade[:, None]
+        lit = albedo.astype(np.float32) * shade[:, None]
+        glare = np.zeros(h * w, dtype=np.float32)
+        if self.glints:
+            for mask, gloss in ((shiny, STEEL_GLINT), (gid_hit >= DISTRACTOR, PLASTIC_SHEEN)):
+                sel = np.flatnonzero(mask)
+                if sel.size:
+                    highlight = specular(n_hit[sel], p_hit[sel], light, origin, gloss)
+                    lit[sel] += highlight.astype(np.float32)[:, None]
+                    glare[idx[sel]] = highlight
+        flat[idx] = lit
         color = flat.reshape(h, w, 3)
         if lighting is not None:
             color *= lighting.field(w, h).astype(np.float32)
-            np.clip(color, 0.0, 1.0, out=color)
+        np.clip(color, 0.0, 1.0, out=color)
         depth = np.full(h * w, np.inf)
         depth[idx] = t_hit[idx]
         return RenderedView(
@@ -257,7 +322,26 @@ class SceneRenderer:
             hit_paint=paint,
             hit_stroke=stroke,
             hit_rust=rust,
+            hit_faded=faded,
+            glare=glare.reshape(h, w),
         )
+
+    @staticmethod
+    def _coat(
+        albedo: FloatArray,
+        at: NDArray[np.int64],
+        opacity: FloatArray,
+        stroke: PaintStroke,
+        points: FloatArray,
+    ) -> None:
+        """Paint ``stroke``'s coat over ``albedo`` at hits ``at`` (in place)."""
+        painted = np.flatnonzero(opacity > 0.0)
+        if painted.size == 0:
+            return
+        where = at[painted]
+        alpha = opacity[painted][:, None]
+        coat = stroke.rgb[None, :] * stroke.tone(points[where])[:, None]
+        albedo[where] = alpha * coat + (1.0 - alpha) * albedo[where]
 
 
 @functools.lru_cache(maxsize=8)

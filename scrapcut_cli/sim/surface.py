@@ -8,14 +8,23 @@ of the order in which views are rendered.
 
 Colours are sRGB in 0–1. The numbers and where they come from:
 
-* Paint: the preset's nominal sRGB (``perception.paint.PAINT_PRESETS``), the colour of the paint
-  under full white light. Fluorescent marking paints are saturated (S ≈ 1).
-* Rust: hue 16–28°, saturation 0.36–0.50, value 0.24–0.52 before shading (``MetalFinish``).
-  Iron oxides (lepidocrocite, goethite, haematite) are orange-brown to dark brown, dull next to
-  fluorescent paint; the ranges are assumed, chosen inside the issue's bounds (hue 10–35°,
-  S <= 0.60, V mostly <= 0.6) and checked against ``perception.paint``'s table, whose orange
-  filter starts at S = 0.65. S stays <= 0.50 so that colour noise and the yard's tint (±4 %)
-  cannot lift rust past 0.60: only saturation and value separate rust from orange paint.
+* Paint: the preset's nominal sRGB (``perception.paint.PAINT_PRESETS``) is a catalogue colour;
+  a real can sprays near it, not on it (brands, batches, how well it was shaken, the primer
+  under a thin coat). :func:`paint_can_rgb` moves it per can: hue ±6°, saturation and value
+  down by up to 15 % and 20 % (assumed: the spread of "fluorescent orange" across marking-paint
+  brands' sRGB swatches is about that). Within a stroke the coat's thickness mottles the value
+  by ±4 % at 5 mm, and the last 1.5 mm of the edge is a thinner coat that lets the substrate
+  show through (opacity falling to 0.55 at the edge), so edge pixels are duller than the band.
+* Old marks (a previous job's paint, ``faded``): the same hue family as the can (±10°), sun- and
+  weather-faded to 55–80 % of its saturation and 55–85 % of its value, worn through in
+  centimetre patches (20–50 % of the stroke gone), no overspray left.
+* Rust: hue 12–30°, saturation 0.50–0.78, value 0.26–0.62 before shading (``MetalFinish``).
+  Iron oxides are orange-brown to dark brown: red oxide (haematite, pigment PR101) is about
+  sRGB (125, 50, 35), S 0.72, V 0.49; yellow oxide (goethite, PY42) about (180, 130, 60),
+  S 0.67, V 0.71; fresh flash rust (lepidocrocite) is more orange still. So rust reaches the
+  saturation of faded or pale paint and partly passes the orange preset's filter (S >= 0.65):
+  what separates it from fresh fluorescent paint (S >= 0.85) is a distinct saturation cluster
+  and a darker value, which perception has to find, not a threshold set below rust.
 * Steel (mill scale, ground patches): hue 210°, S 0.04, V 0.40–0.60. Galvanised wire (the
   basket): S 0.03, V 0.52–0.72.
 * Concrete floor: hue 35°, S 0.07, V 0.45–0.60.
@@ -27,6 +36,11 @@ Colours are sRGB in 0–1. The numbers and where they come from:
   band; yard 20 %, 10 mm, 40 mm (assumed values that look like real marking-paint photos).
 * Shading: Lambert from a light 3 cm above the lens (the LED ring / lamp on the wrist) plus
   ambient 0.35 (a diffuse yard or hall light); intensity = ambient + (1 - ambient)·cos θ.
+* Glints (``glints``): ground or scratched steel is mirror-like in spots. 12 % of the bare steel
+  (patches at 8 mm scale) is shiny and reflects the wrist light as a Blinn-Phong highlight
+  (exponent 300, strength 1.5: a few pixels go white when the spot faces the lens); the D435i's
+  projected pattern is mirrored away there, so the depth has holes (``camera.simulate_depth``).
+  Plastic distractors have a broad, weak sheen (exponent 40, strength 0.25).
 """
 
 from __future__ import annotations
@@ -164,8 +178,8 @@ class MetalFinish:
     steel_value_range: float = 0.10  # ± around the steel value (mill scale, grinding marks)
     rust_fraction: float = 0.35
     rust_scale_m: float = 0.05
-    rust_dark_hsv: tuple[float, float, float] = (16.0, 0.50, 0.24)
-    rust_light_hsv: tuple[float, float, float] = (28.0, 0.36, 0.52)
+    rust_dark_hsv: tuple[float, float, float] = (12.0, 0.78, 0.26)
+    rust_light_hsv: tuple[float, float, float] = (30.0, 0.50, 0.62)
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.rust_fraction <= 1.0:
@@ -243,6 +257,49 @@ def _normal_quantile(p: float) -> float:
 
 # --------------------------------------------------------------------------- spray paint
 
+#: Per-can spread around a preset's nominal colour (see the module docstring): hue ± degrees,
+#: largest relative loss of saturation and of value.
+CAN_HUE_DEG = 6.0
+CAN_SAT_LOSS = 0.15
+CAN_VAL_LOSS = 0.20
+#: An old mark's colour relative to the can: hue ± degrees, saturation and value factors.
+FADED_HUE_DEG = 10.0
+FADED_SAT = (0.55, 0.80)
+FADED_VAL = (0.55, 0.85)
+
+
+def _rgb_to_hsv(rgb: ArrayLike) -> tuple[float, float, float]:
+    r, g, b = (float(c) for c in np.asarray(rgb, dtype=np.float64).reshape(3))
+    h, s, v = colorsys.rgb_to_hsv(r, g, b)
+    return 360.0 * h, s, v
+
+
+def _to_bytes(rgb: FloatArray) -> tuple[int, int, int]:
+    r, g, b = (int(c) for c in np.clip(np.rint(255.0 * rgb), 0, 255))
+    return r, g, b
+
+
+def paint_can_rgb(nominal: tuple[int, int, int], rng: np.random.Generator) -> tuple[int, int, int]:
+    """The colour one can really sprays (sRGB bytes): ``nominal`` (a preset's sRGB bytes) moved
+    in hue by up to ±``CAN_HUE_DEG``, saturation and value lowered by up to ``CAN_SAT_LOSS`` and
+    ``CAN_VAL_LOSS`` (relative), uniformly; never the nominal colour exactly."""
+    h, s, v = _rgb_to_hsv(np.asarray(nominal, dtype=np.float64) / 255.0)
+    h += rng.uniform(-CAN_HUE_DEG, CAN_HUE_DEG)
+    s *= 1.0 - rng.uniform(0.02, CAN_SAT_LOSS)
+    v *= 1.0 - rng.uniform(0.02, CAN_VAL_LOSS)
+    return _to_bytes(hsv_to_rgb(h, s, v))
+
+
+def faded_rgb(can: tuple[int, int, int], rng: np.random.Generator) -> tuple[int, int, int]:
+    """An old, weathered mark of the same hue family as ``can`` (sRGB bytes): hue ±
+    ``FADED_HUE_DEG``, saturation and value scaled by factors drawn from ``FADED_SAT`` and
+    ``FADED_VAL``."""
+    h, s, v = _rgb_to_hsv(np.asarray(can, dtype=np.float64) / 255.0)
+    h += rng.uniform(-FADED_HUE_DEG, FADED_HUE_DEG)
+    s *= rng.uniform(*FADED_SAT)
+    v *= rng.uniform(*FADED_VAL)
+    return _to_bytes(hsv_to_rgb(h, s, v))
+
 
 @dataclass(frozen=True)
 class OversprayModel:
@@ -276,6 +333,9 @@ class PaintStroke:
         Specks beside the stroke.
     seed : int
         Seeds the ragged edge and the specks.
+    wear : float
+        Share (0-1) of the stroke worn away, in patches about ``WEAR_SCALE_M`` across (an old
+        mark); 0 for fresh paint.
     """
 
     #: Along-line width variation (fractions of the half width) and the edge roughness.
@@ -287,6 +347,15 @@ class PaintStroke:
     EDGE_SCALE_M = 0.0015
     RESAMPLE_M = 0.0005
     GRID_M = 0.003
+    #: The coat thins over the last EDGE_SOFT_M of the edge, down to EDGE_OPACITY; specks are
+    #: thin drops; the coat's value mottles by ±TONE_VARIATION at TONE_SCALE_M.
+    EDGE_SOFT_M = 0.0015
+    EDGE_OPACITY = 0.55
+    SPECK_OPACITY = 0.8
+    TONE_VARIATION = 0.04
+    TONE_SCALE_M = 0.005
+    #: Worn patches of an old mark are about this big.
+    WEAR_SCALE_M = 0.008
 
     def __init__(
         self,
@@ -296,6 +365,7 @@ class PaintStroke:
         rgb: tuple[int, int, int],
         overspray: OversprayModel | None = None,
         seed: int = 0,
+        wear: float = 0.0,
     ) -> None:
         ref = np.asarray(reference, dtype=np.float64).reshape(-1, 3)
         if len(ref) < 2:
@@ -307,6 +377,9 @@ class PaintStroke:
         self.rgb = np.asarray(rgb, dtype=np.float64) / 255.0
         self.overspray = overspray if overspray is not None else OversprayModel()
         self.seed = int(seed)
+        if not 0.0 <= wear < 1.0:
+            raise ValueError(f"wear must be within [0, 1), got {wear}")
+        self.wear = float(wear)
         # Distances come from a 0.5 mm resampling: the nearest vertex (KD-tree) and the exact
         # foot point on its two segments. That distance D' satisfies D <= D' <= sqrt(D² + h²/4)
         # for the true distance D and spacing h, i.e. within 3 µm at the 12 mm stroke edge.
@@ -367,10 +440,16 @@ class PaintStroke:
 
     def coverage(self, points: ArrayLike) -> tuple[BoolArray, BoolArray]:
         """(stroke, speck) masks (N,) for surface points (N, 3), base frame."""
+        layer = self.layer(points)
+        return layer.stroke, layer.speck
+
+    def layer(self, points: ArrayLike) -> PaintLayer:
+        """Where the paint lies on surface points (N, 3), base frame, and how thick it is."""
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         n = len(p)
         stroke = np.zeros(n, dtype=bool)
         speck = np.zeros(n, dtype=bool)
+        opacity = np.zeros(n)
         reach = self.max_half_width_m + self.overspray.band_m + self.RESAMPLE_M
         approx = self._grid.lookup(p)
         # Table error plus the sampled line's own (a vertex is at most 0.25 mm farther than the
@@ -378,12 +457,13 @@ class PaintStroke:
         err = self._grid.error_m + 0.5 * self.RESAMPLE_M
         near = np.flatnonzero(approx <= reach + err)
         if near.size == 0:
-            return stroke, speck
+            return PaintLayer(stroke, speck, opacity)
         q = p[near]
         dist = approx[near]
         inside = dist + err < self.min_half_width_m
         ring = np.flatnonzero(~inside & (dist - err <= self.max_half_width_m))
         half = np.full(near.size, self.max_half_width_m)
+        alpha = np.ones(near.size)
         if ring.size:
             _, nearest = self._tree.query(q[ring])
             dist[ring], s = self.distance_and_arc_length(q[ring], nearest)
@@ -392,7 +472,15 @@ class PaintStroke:
             )
             half[ring] = self.half_width(s) + edge
             inside[ring] = dist[ring] < half[ring]
+            # Points off the ring are more than the table's error inside the narrowest edge
+            # (> EDGE_SOFT_M): full coat.
+            gap = np.clip((half[ring] - dist[ring]) / self.EDGE_SOFT_M, 0.0, 1.0)
+            alpha[ring] = self.EDGE_OPACITY + (1.0 - self.EDGE_OPACITY) * gap
+        if self.wear > 0.0:
+            worn = value_noise(q, self.WEAR_SCALE_M, self.seed + 105) < _noise_level(self.wear)
+            inside &= ~worn
         stroke[near] = inside
+        opacity[near] = np.where(inside, alpha, 0.0)
         model = self.overspray
         if model.density > 0:
             # Outside the ring ``dist`` is the table's estimate: good enough for a probability.
@@ -401,7 +489,38 @@ class PaintStroke:
             chance = model.density * np.exp(-gap / model.decay_m)
             hit = (~inside) & (gap < model.band_m) & (hash01(cells, self.seed + 104) < chance)
             speck[near] = hit
-        return stroke, speck
+            opacity[near[hit]] = self.SPECK_OPACITY
+        return PaintLayer(stroke, speck, opacity)
+
+    def tone(self, points: ArrayLike) -> FloatArray:
+        """Value factor (N,) of the coat at surface points (N, 3): 1 ± ``TONE_VARIATION``."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        noise = value_noise(p, self.TONE_SCALE_M, self.seed + 106)
+        return np.asarray(1.0 + self.TONE_VARIATION * (2.0 * noise - 1.0))
+
+
+def _noise_level(share: float) -> float:
+    """The one-octave value-noise level below which ``share`` of the surface lies (its
+    distribution is close to normal, mean 0.5, SD ``_NOISE_SD``)."""
+    return 0.5 + _NOISE_SD * _normal_quantile(share)
+
+
+#: SD of one octave of value noise (smoothstep-interpolated uniform lattice values), measured.
+_NOISE_SD = 0.185
+
+
+@dataclass(frozen=True, eq=False)
+class PaintLayer:
+    """Paint on surface points (N,): ``stroke`` and ``speck`` masks and the coat's
+    ``opacity`` (0 where unpainted; the substrate shows through the rest)."""
+
+    stroke: BoolArray
+    speck: BoolArray
+    opacity: FloatArray
+
+    @property
+    def paint(self) -> BoolArray:
+        return np.asarray(self.stroke | self.speck)
 
 
 class _DistanceGrid:
@@ -464,3 +583,50 @@ def lambert(
     cos = np.einsum("ij,ij->i", n, to_light) / np.maximum(distance, 1e-12)
     np.clip(cos, 0.0, 1.0, out=cos)
     return np.asarray(ambient + (1.0 - ambient) * cos)
+
+
+# --------------------------------------------------------------------------- glints
+
+
+@dataclass(frozen=True)
+class Gloss:
+    """A Blinn-Phong highlight: ``strength`` · (n·h)^``exponent`` added to every channel."""
+
+    exponent: float
+    strength: float
+
+
+#: Ground or scratched steel (mirror-like spots) and a plastic crate's or cone's sheen.
+STEEL_GLINT = Gloss(exponent=300.0, strength=1.5)
+PLASTIC_SHEEN = Gloss(exponent=40.0, strength=0.25)
+#: Share of the bare steel that is shiny, in patches this big.
+SHINY_SHARE = 0.12
+SHINY_SCALE_M = 0.008
+
+
+def shiny_steel(points: ArrayLike, seed: int, *, share: float = SHINY_SHARE) -> BoolArray:
+    """Mask (N,) of surface points (N, 3) on mirror-like (ground, scratched) steel spots."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    return np.asarray(value_noise(p, SHINY_SCALE_M, seed + 21) > _noise_level(1.0 - share))
+
+
+def specular(
+    normals: ArrayLike,
+    points: ArrayLike,
+    light_position: ArrayLike,
+    eye_position: ArrayLike,
+    gloss: Gloss,
+) -> FloatArray:
+    """Highlight intensity (N,) >= 0 of a Blinn-Phong lobe at surface points (N, 3) with unit
+    ``normals`` (N, 3) facing the viewer, lit from ``light_position`` and seen from
+    ``eye_position`` (3,), all in one frame."""
+    n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    to_light = np.asarray(light_position, dtype=np.float64) - p
+    to_eye = np.asarray(eye_position, dtype=np.float64) - p
+    to_light /= np.maximum(np.linalg.norm(to_light, axis=1, keepdims=True), 1e-12)
+    to_eye /= np.maximum(np.linalg.norm(to_eye, axis=1, keepdims=True), 1e-12)
+    h = to_light + to_eye
+    h /= np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-12)
+    cos = np.clip(np.einsum("ij,ij->i", n, h), 0.0, 1.0)
+    return np.asarray(gloss.strength * cos**gloss.exponent)

@@ -43,7 +43,6 @@ from scrapcut_cli.geometry import (
     interpolate_polyline,
     matrix_to_quat_xyzw,
 )
-from scrapcut_cli.toolpath.collision import choose_torch_axes
 from scrapcut_cli.toolpath.normals import (
     estimate_path_normals,
     fill_unsupported,
@@ -58,6 +57,7 @@ from scrapcut_cli.toolpath.setpoints import (
     cutting_times,
     perpendicular_to,
     points_array,
+    torch_axes,
     torch_rotations,
 )
 from scrapcut_cli.toolpath.speeds import SpeedTable, load_speed_table
@@ -141,7 +141,7 @@ def make_loop_path(
         )
     normals = _round_the_loop(arc, total, estimate.normals, estimate.supported, config)
     normals = perpendicular_to(normals, tangents)
-    torch = _torch(points, normals, tangents, surface, config)
+    torch = torch_axes(points, normals, tangents, surface, config)
     unobserved = arc_mask(arc, [tuple(a) for a in curve.info.get("unobserved_arcs_m", [])])
 
     good = ~unobserved & estimate.supported & ~torch.colliding
@@ -160,7 +160,7 @@ def make_loop_path(
     lead_dir = -side if lead else tangents[i0]
     lead_tangents = np.tile(lead_dir, (lead, 1))
     lead_normals = np.tile(normals[i0], (lead, 1))
-    lead_torch = _torch(lead_points, lead_normals, lead_tangents, surface, config)
+    lead_torch = torch_axes(lead_points, lead_normals, lead_tangents, surface, config)
 
     surface_points = np.vstack([lead_points, points[order]])
     all_normals = np.vstack([lead_normals, normals[order]])
@@ -299,28 +299,6 @@ def _round_the_loop(
         arc3, filled, sigma_m=config.normal_smoothing_m, edge_angle_deg=config.edge_angle_deg
     )
     return np.asarray(smooth[n : 2 * n])
-
-
-def _torch(
-    points: FloatArray,
-    normals: FloatArray,
-    tangents: FloatArray,
-    surface: FloatArray,
-    config: ToolpathConfig,
-) -> Any:
-    return choose_torch_axes(
-        points,
-        normals,
-        tangents,
-        surface,
-        standoff_m=config.standoff_m,
-        length_m=config.torch_length_m,
-        radius_m=config.torch_radius_m,
-        max_tilt_deg=config.max_tilt_deg,
-        tilt_steps=config.tilt_steps,
-        directions=config.tilt_directions,
-        min_points=config.collision_min_points,
-    )
 
 
 def _arcs_along_path(

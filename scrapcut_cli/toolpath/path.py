@@ -32,10 +32,18 @@ class CuttingPath:
     time : (N,) float64
         Time stamps, s, from the start of the pierce.
     flags : list of list of str
-        Per set-point flags, e.g. ``["tilted"]`` or ``["collision"]``.
+        Per set-point flags, e.g. ``["tilted"]``, ``["collision"]``, ``["bridged_gap"]``.
     segments : list of str
         Per set-point part of the cut: ``cut``, or on a loop ``lead_in`` (from the pierce onto
         the line) and ``overlap`` (past the start, closing the kerf). Empty: all ``cut``.
+    support : (N,) float64 or None
+        Share (0-1) of the stroke's band around each set-point that holds paint.
+    frames : (N,) int64 or None
+        How many frames saw paint there (0: none).
+    sigma_m : (N,) float64 or None
+        Estimated lateral uncertainty of each set-point, metres.
+
+    The last three are None when the curve carried no confidence (``fitting.stroke``).
     """
 
     positions: NDArray[np.float64]
@@ -50,6 +58,9 @@ class CuttingPath:
     spacing_m: float
     info: dict[str, object] = field(default_factory=dict)
     segments: list[str] = field(default_factory=list)
+    support: NDArray[np.float64] | None = None
+    frames: NDArray[np.int64] | None = None
+    sigma_m: NDArray[np.float64] | None = None
 
     def __len__(self) -> int:
         return len(self.positions)

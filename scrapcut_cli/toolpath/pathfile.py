@@ -9,8 +9,14 @@ A set-point's ``flags`` are empty or name what the operator should look at: ``ti
 perpendicular torch would hit the observed piece; the pose is tilted within the bound and the
 speed lowered for the longer cut), ``collision`` (no tilt within the bound is free; the pose
 stays perpendicular), ``no_surface`` (too little observed surface around it, e.g. a gap in a
-wire mesh; the normal is interpolated along the path). Time stamps ``t_s`` start at the pierce
+wire mesh; the normal is interpolated along the path), ``bridged_gap`` (no observed surface
+under it: the curve bridges a hole or a mesh's gap there), ``low_support`` (less than half of the
+stroke's band around it holds paint). Time stamps ``t_s`` start at the pierce
 time: the torch dwells at the first set-point from 0 to ``t_s[0]``.
+
+Confidence, per set-point when the fit estimated it (``fitting.stroke``): ``support`` (share 0-1
+of the stroke's band around it that holds paint), ``frames`` (how many frames saw paint there),
+``sigma_m`` (estimated lateral uncertainty, metres).
 """
 
 from __future__ import annotations
@@ -34,9 +40,9 @@ from scrapcut_cli.geometry import polyline_length, quat_xyzw_to_matrix
 from scrapcut_cli.toolpath.path import CuttingPath
 
 SCHEMA = "scrapcut.path/v1"
-CSV_COLUMNS = (
-    "s", "x", "y", "z", "qx", "qy", "qz", "qw", "nx", "ny", "nz", "speed_m_s", "t_s", "flags",
-)  # fmt: skip
+CSV_COLUMNS = ("s", "x", "y", "z", "qx", "qy", "qz", "qw", "nx", "ny", "nz", "speed_m_s", "t_s")
+#: Columns a path with confidence adds after :data:`CSV_COLUMNS` (flags as 0/1).
+CONFIDENCE_COLUMNS = ("support", "frames", "sigma_m", "bridged_gap", "low_support")
 #: Arrays in ``info`` dictionaries longer than this are left out of the file (e.g. a skeleton's
 #: vertices): the file keeps diagnostics, not intermediate data.
 MAX_INFO_ARRAY = 16
@@ -52,6 +58,7 @@ def path_to_dict(
     frame_id: str,
     created: str | None = None,
     calibration: Mapping[str, Any] | None = None,
+    selection: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The path file as a JSON-ready dictionary.
 
@@ -60,6 +67,8 @@ def path_to_dict(
     time stamp; default now (UTC) — pass a fixed one for byte-identical files.
     ``calibration``: the camera mount and clock offset the frames were posed with, when not
     the recording's own (``--calibration`` / ``--self-calibrate``); stored as ``calibration``.
+    ``selection``: the line-selection report (the line, every rejected candidate); stored as
+    ``selection``.
     """
     if created is None:
         created = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
@@ -74,6 +83,7 @@ def path_to_dict(
             "flags": [str(f) for f in path.flags[i]],
             "surface_point": _floats(path.surface_points[i]),
             **({"segment": path.segments[i]} if path.segments else {}),
+            **_confidence(path, i),
         }
         for i in range(len(path))
     ]
@@ -101,6 +111,7 @@ def path_to_dict(
         },
         "config": _jsonable(dict(config)),
         **({} if calibration is None else {"calibration": _jsonable(dict(calibration))}),
+        **({} if selection is None else {"selection": _jsonable(dict(selection))}),
     }
 
 
@@ -190,6 +201,7 @@ def path_from_dict(data: Any) -> tuple[Curve, CuttingPath, dict[str, Any]]:
     if not all(isinstance(g, str) for g in segments):
         raise ToolpathError("path file: path.setpoints[*].segment must be a string")
     summary = path_d.get("summary") or {}
+    confidence = _read_confidence(setpoints)
     path = CuttingPath(
         positions=positions,
         orientations_xyzw=orientations,
@@ -203,6 +215,7 @@ def path_from_dict(data: Any) -> tuple[Curve, CuttingPath, dict[str, Any]]:
         spacing_m=path_spacing,
         info=dict(summary) if isinstance(summary, dict) else {},
         segments=segments if any(g != "cut" for g in segments) else [],
+        **confidence,
     )
     meta = {k: v for k, v in data.items() if k not in ("curve", "path")}
     return curve, path, meta
@@ -235,9 +248,11 @@ def read_path_file(source: str | Path) -> tuple[Curve, CuttingPath, dict[str, An
 
 
 def write_path_csv(path: CuttingPath, out: str | Path, *, frame_id: str = "") -> None:
-    """One row per set-point: ``s,x,y,z,qx,qy,qz,qw,nx,ny,nz,speed_m_s,t_s,flags`` (SI units;
-    ``flags`` joined by ``;``, empty for a clean set-point), after one ``# frame_id: NAME``
-    line (``comment="#"`` in numpy/pandas skips it)."""
+    """One row per set-point: ``s,x,y,z,qx,qy,qz,qw,nx,ny,nz,speed_m_s,t_s`` (SI units), then
+    ``support,frames,sigma_m,bridged_gap,low_support`` when the path has confidence (frames a
+    count, the two flags 0 or 1), then ``flags`` (all of the set-point's flags joined by
+    ``;``, empty for a clean set-point); after one ``# frame_id: NAME`` line
+    (``comment="#"`` in numpy/pandas skips it)."""
     table = np.column_stack(
         [
             path.arc_length,
@@ -248,13 +263,24 @@ def write_path_csv(path: CuttingPath, out: str | Path, *, frame_id: str = "") ->
             path.time,
         ]
     )
+    rows = [[repr(float(v)) for v in row] for row in table]
+    columns = list(CSV_COLUMNS)
+    if path.sigma_m is not None and path.support is not None and path.frames is not None:
+        columns += CONFIDENCE_COLUMNS
+        for i, row in enumerate(rows):
+            row += [
+                repr(float(path.support[i])),
+                str(int(path.frames[i])),
+                repr(float(path.sigma_m[i])),
+                str(int("bridged_gap" in path.flags[i])),
+                str(int("low_support" in path.flags[i])),
+            ]
     with atomic_path(out) as tmp, tmp.open("w", newline="", encoding="utf-8") as fh:
         fh.write(f"# frame_id: {frame_id}\n")
         writer = csv.writer(fh, lineterminator="\n")
-        writer.writerow(CSV_COLUMNS)
+        writer.writerow([*columns, "flags"])
         writer.writerows(
-            [*(repr(float(v)) for v in row), ";".join(flags)]
-            for row, flags in zip(table, path.flags, strict=True)
+            [*row, ";".join(flags)] for row, flags in zip(rows, path.flags, strict=True)
         )
 
 
@@ -273,6 +299,32 @@ def write_path_tum(path: CuttingPath, out: str | Path, *, frame_id: str = "") ->
 
 
 # --------------------------------------------------------------------------- helpers
+
+
+def _confidence(path: CuttingPath, i: int) -> dict[str, Any]:
+    """Set-point ``i``'s confidence keys (none when the path has no confidence)."""
+    if path.sigma_m is None or path.support is None or path.frames is None:
+        return {}
+    return {
+        "support": float(path.support[i]),
+        "frames": int(path.frames[i]),
+        "sigma_m": float(path.sigma_m[i]),
+    }
+
+
+def _read_confidence(setpoints: list[dict[str, Any]]) -> dict[str, Any]:
+    """``support``, ``frames`` and ``sigma_m`` arrays when every set-point has them."""
+    keys = ("support", "frames", "sigma_m")
+    if not setpoints or not all(all(k in sp for k in keys) for sp in setpoints):
+        return {}
+    values = _array([[sp[k] for k in keys] for sp in setpoints], 3, "setpoint confidence")
+    if np.any(values[:, 2] < 0.0) or np.any(values[:, 1] < 0.0):
+        raise ToolpathError("path file: a set-point's sigma_m or frames is negative")
+    return {
+        "support": values[:, 0].copy(),
+        "frames": values[:, 1].astype(np.int64),
+        "sigma_m": values[:, 2].copy(),
+    }
 
 
 def _floats(values: Sequence[float] | NDArray[np.float64]) -> list[float]:

@@ -18,7 +18,9 @@ look-up table of the scrap's properties. :func:`make_cutting_path` does it in th
    the pierce dwell at the start;
 6. how the cut starts and finishes (:mod:`~scrapcut_cli.toolpath.ends`): at an edge the line
    reaches (preheat there, no pierce; the path is cut backwards when only its far end reaches
-   one) and with a run-out past a far edge; the summary's ``ends`` says what and why.
+   one) and with a run-out past a far edge; the summary's ``ends`` says what and why;
+7. each set-point's confidence from the curve's (``Curve.confidence``): support, frames, σ,
+   and the flags ``bridged_gap`` (no surface under it) and ``low_support``.
 
 A closed curve (a ring, a cut-out) is cut by :mod:`~scrapcut_cli.toolpath.loop` instead: a
 pierce and lead-in, once round, an overlap past the start (no edge start, no run-out).
@@ -31,9 +33,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from scrapcut_cli.config import ToolpathConfig
 from scrapcut_cli.errors import ToolpathError
-from scrapcut_cli.fitting.curve import Curve
+from scrapcut_cli.fitting.curve import Curve, CurveConfidence
 from scrapcut_cli.geometry import cumulative_length, interpolate_polyline, matrix_to_quat_xyzw
-from scrapcut_cli.toolpath.collision import choose_torch_axes
+from scrapcut_cli.toolpath.collision import TorchAxes, choose_torch_axes
 from scrapcut_cli.toolpath.ends import CutEndsDecision, cut_ends
 from scrapcut_cli.toolpath.normals import (
     estimate_path_normals,
@@ -49,6 +51,8 @@ FloatArray = NDArray[np.float64]
 FLAG_TILTED = "tilted"  # the perpendicular torch collided; a tilted one is free
 FLAG_COLLISION = "collision"  # no torch axis within the tilt bound is free
 FLAG_NO_SURFACE = "no_surface"  # too few surface points around it; normal interpolated
+FLAG_BRIDGED_GAP = "bridged_gap"  # no surface under it: the curve bridges a hole or a gap
+FLAG_LOW_SUPPORT = "low_support"  # little paint around it (fitting.curve.LOW_SUPPORT)
 
 
 def make_cutting_path(
@@ -158,19 +162,7 @@ def _cutting_path(
                 ends=ends,
             )
 
-    torch = choose_torch_axes(
-        surface_points,
-        normals,
-        tangents,
-        surface,
-        standoff_m=config.standoff_m,
-        length_m=config.torch_length_m,
-        radius_m=config.torch_radius_m,
-        max_tilt_deg=config.max_tilt_deg,
-        tilt_steps=config.tilt_steps,
-        directions=config.tilt_directions,
-        min_points=config.collision_min_points,
-    )
+    torch = torch_axes(surface_points, normals, tangents, surface, config)
     positions = surface_points + config.standoff_m * torch.axes
     orientations = matrix_to_quat_xyzw(torch_rotations(torch.axes, tangents))
 
@@ -178,11 +170,14 @@ def _cutting_path(
         arc, torch.tilt_rad, speeds, material=config.material, thickness_mm=config.thickness_mm
     )
 
+    confidence = setpoint_confidence(curve, arc)
     flags: list[list[str]] = [[] for _ in range(len(arc))]
     for mask, name in (
         (~estimate.supported, FLAG_NO_SURFACE),
         (torch.tilted, FLAG_TILTED),
         (torch.colliding, FLAG_COLLISION),
+        (confidence.bridged_gap if confidence else np.zeros(len(arc), bool), FLAG_BRIDGED_GAP),
+        (confidence.low_support if confidence else np.zeros(len(arc), bool), FLAG_LOW_SUPPORT),
     ):
         for i in np.flatnonzero(mask):
             flags[i].append(name)
@@ -198,6 +193,7 @@ def _cutting_path(
         "line_normals": int(estimate.line_like.sum()),
         "coarse_normals": int(estimate.coarse.sum()),
         "max_tilt_used_deg": float(np.degrees(torch.tilt_rad.max())),
+        **_confidence_summary(confidence),
         "material": config.material,
         "fuel": chart.fuel,
         "thickness_mm": float(config.thickness_mm),
@@ -223,7 +219,43 @@ def _cutting_path(
         standoff_m=float(config.standoff_m),
         spacing_m=float(config.spacing_m),
         info=info,
+        support=None if confidence is None else confidence.support,
+        frames=None if confidence is None else confidence.frames,
+        sigma_m=None if confidence is None else confidence.sigma_m,
     )
+
+
+def setpoint_confidence(curve: Curve, arc_length: ArrayLike) -> CurveConfidence | None:
+    """The curve's confidence at set-points (arc lengths (N,) along ``curve.points``, metres):
+    support and σ interpolated, frames and flags of the nearest curve point; None when the
+    curve has none."""
+    conf = curve.confidence
+    if conf is None or len(conf.sigma_m) != len(curve.points):
+        return None
+    s = cumulative_length(curve.points)
+    arc = np.asarray(arc_length, dtype=np.float64)
+    nearest = np.clip(np.searchsorted(s, arc), 1, len(s) - 1)
+    nearest = np.where(arc - s[nearest - 1] < s[nearest] - arc, nearest - 1, nearest)
+    picked = conf.at(nearest)
+    return CurveConfidence(
+        support=np.interp(arc, s, conf.support),
+        frames=picked.frames,
+        sigma_m=np.interp(arc, s, conf.sigma_m),
+        bridged_gap=picked.bridged_gap,
+        low_support=picked.low_support,
+    )
+
+
+def _confidence_summary(confidence: CurveConfidence | None) -> dict[str, object]:
+    """Set-point counts of the confidence flags and σ figures for the path's summary."""
+    if confidence is None:
+        return {}
+    return {
+        "bridged_gap": int(np.count_nonzero(confidence.bridged_gap)),
+        "low_support": int(np.count_nonzero(confidence.low_support)),
+        "sigma_median_m": float(np.median(confidence.sigma_m)),
+        "sigma_max_m": float(np.max(confidence.sigma_m)),
+    }
 
 
 def sample_setpoints(
@@ -355,3 +387,28 @@ def check_toolpath_config(config: ToolpathConfig) -> None:
         raise ToolpathError(
             f"toolpath.edge_angle_deg must be in (0, 180], got {config.edge_angle_deg}"
         )
+
+
+def torch_axes(
+    surface_points: FloatArray,
+    normals: FloatArray,
+    tangents: FloatArray,
+    surface: FloatArray,
+    config: ToolpathConfig,
+) -> TorchAxes:
+    """:func:`~scrapcut_cli.toolpath.collision.choose_torch_axes` with the torch, standoff and
+    tilt search of ``config``: the one place the toolpath's settings reach the collision check
+    (open cuts and loops alike)."""
+    return choose_torch_axes(
+        surface_points,
+        normals,
+        tangents,
+        surface,
+        standoff_m=config.standoff_m,
+        length_m=config.torch_length_m,
+        radius_m=config.torch_radius_m,
+        max_tilt_deg=config.max_tilt_deg,
+        tilt_steps=config.tilt_steps,
+        directions=config.tilt_directions,
+        min_points=config.collision_min_points,
+    )
