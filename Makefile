@@ -23,8 +23,9 @@ demo: $(STAMP)
 # scrap-yard table with its self-calibrated rows, each rewriting its marked section of README.md
 # with the command, machine and date. Table I runs without --self-calibrate: on its d435i scenes
 # (no frames while moving) the self-calibrated rows equal the plain ones and double the run.
-# Ten seeds of Table I take about 25 min of two idle cores; the yard table, with every piece and
-# the self-calibration, several times that: pass fewer seeds on a small machine.
+# Ten seeds of Table I take about 20 min of two idle cores (1197 s on 2026-12-02); the yard
+# table, with every piece and the self-calibration, several times that: pass fewer seeds on a
+# small machine.
 README_SEEDS ?= 0-9
 YARD_SEEDS ?= $(README_SEEDS)
 README_SELF_CALIBRATE ?= --self-calibrate
