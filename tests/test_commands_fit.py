@@ -545,6 +545,12 @@ def test_two_lines_the_scan_one_is_cut_and_pick_all_cuts_both(tmp_path: Path) ->
     second_curve, _, second_meta = read_path_file(tmp_path / "all_2.json")
     assert second_meta["selection"]["line_index"] == 1
     assert PolylineDistance(second).distance(second_curve.points).max() < 0.01
+    # Another run under a new name would write new_2.json too: an old one is refused up front.
+    (tmp_path / "new_2.json").write_text("keep")
+    again = _run("fit", rec, "-o", tmp_path / "new.json", "--pick", "all", "--config", config)
+    line = _one_line_error(again)
+    assert "--pick all would replace" in line and "new_2.json" in line and "--force" in line
+    assert (tmp_path / "new_2.json").read_text() == "keep" and not (tmp_path / "new.json").exists()
 
 
 def test_no_paint_metadata_means_paint_auto(tmp_path: Path) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import glob
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -25,7 +26,7 @@ from scrapcut_cli.commands._options import (
     stitch_options,
 )
 from scrapcut_cli.config import FitMethod, choice_names
-from scrapcut_cli.errors import ScrapcutError
+from scrapcut_cli.errors import FileError, ScrapcutError
 
 METHODS = choice_names(FitMethod)
 
@@ -305,6 +306,15 @@ def fit(
     stage, shared = split_stage_options(shared)
     config = apply_stage_options(build_config(config_path, **shared), stage)
     config = config.override("selection", pick=pick)
+    if config.selection.pick == "all" and not force:
+        # --pick all names PATH_2.json, PATH_3.json, ... once it knows how many lines there
+        # are: an earlier run's files under those names are refused now, not replaced then.
+        taken = sorted(output.parent.glob(f"{glob.escape(output.stem)}_[0-9]*.json"))
+        if taken:
+            raise FileError(
+                f"-o {output}: --pick all would replace {taken[0]} "
+                f"({len(taken)} file(s) {output.stem}_N*.json); add --force to replace them"
+            )
     config = config.override("skeleton", leaf_size_m=mm_to_m(leaf_size_mm))
     config = config.override(
         "nurbs", smoothness=smoothness, control_points=control_points, degree=degree
