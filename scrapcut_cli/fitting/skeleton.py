@@ -483,15 +483,7 @@ def _longest_path(skeleton: IntArray, *, prune_length: float) -> tuple[IntArray,
     tree is exactly its longest path."""
     if len(skeleton) == 0:
         raise FittingError("skeleton fit: thinning left no voxels")
-    packed = _pack(skeleton)
-    order = np.argsort(packed)
-    keys = packed[order]
-    i, j, w = _neighbour_edges(keys)
-    n = len(keys)
-    graph = csr_matrix((w, (i, j)), shape=(n, n))
-    graph = (graph + graph.T).tocsr()
-    tree = minimum_spanning_tree(graph)
-    tree = (tree + tree.T).tocsr()
+    order, _, _, graph, tree = _skeleton_graph(skeleton)
     # A tiled thinning can leave a seam; take the largest piece of the skeleton.
     _, labels = connected_components(tree, directed=False)
     biggest = int(np.argmax(np.bincount(labels)))
@@ -509,6 +501,22 @@ def _longest_path(skeleton: IntArray, *, prune_length: float) -> tuple[IntArray,
     sub = np.flatnonzero(keep)
     path = tree_diameter(graph[sub][:, sub], start=0)
     return np.asarray(order[sub[path]], dtype=np.int64), pruned_total
+
+
+def _skeleton_graph(
+    skeleton: IntArray,
+) -> tuple[IntArray, IntArray, IntArray, csr_matrix, csr_matrix]:
+    """The skeleton voxels' neighbour graph and its minimum spanning tree, both symmetric:
+    (order, i, j, graph, tree). Node k is voxel ``skeleton[order[k]]`` (sorted by packed key);
+    ``i < j`` are the neighbour edges (:func:`_neighbour_edges`)."""
+    packed = _pack(skeleton)
+    order = np.argsort(packed)
+    i, j, w = _neighbour_edges(packed[order])
+    n = len(order)
+    graph = csr_matrix((w, (i, j)), shape=(n, n))
+    graph = (graph + graph.T).tocsr()
+    tree = minimum_spanning_tree(graph)
+    return order, i, j, graph, (tree + tree.T).tocsr()
 
 
 def _branch_labels(tree: csr_matrix, keep: NDArray[np.bool_]) -> IntArray:
@@ -790,15 +798,7 @@ def _largest_cycle(skeleton: IntArray, *, min_length: float) -> IntArray | None:
     """
     from scipy.sparse.csgraph import dijkstra
 
-    packed = _pack(skeleton)
-    order = np.argsort(packed)
-    keys = packed[order]
-    i, j, w = _neighbour_edges(keys)
-    n = len(keys)
-    graph = csr_matrix((w, (i, j)), shape=(n, n))
-    graph = (graph + graph.T).tocsr()
-    tree = minimum_spanning_tree(graph)
-    tree = (tree + tree.T).tocsr()
+    order, i, j, graph, tree = _skeleton_graph(skeleton)
     in_tree = set(zip(*tree.nonzero(), strict=True))
     extra = [(a, b) for a, b in zip(i.tolist(), j.tolist(), strict=True) if (a, b) not in in_tree]
     if not extra:
