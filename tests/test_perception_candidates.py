@@ -167,3 +167,67 @@ def test_saturation_modes_split_only_at_a_real_dip() -> None:
     core = paint_core(np.concatenate([paint, rust]))
     assert 0.85 < core < 0.93
     assert np.isnan(paint_core(np.full(5, np.nan)))
+
+
+def overspray_scene(
+    *, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """(points, rgb, sight lines, {part: indices}): heavy overspray on rust, as the yard preset
+    sprays it. The line's fresh paint is a 25 mm band; around it, to 45 mm from the curve,
+    paint mixed with rust (S ~0.88, the paint's own saturation layer) widens its candidate to
+    ~90 mm, past a stroke's width, until the paint's core is set apart; rust (S 0.72) lies under
+    it all. Off the piece, 6 cm above it and never looked at, a short dull stroke (S 0.72) is the
+    only stroke-like candidate before the core is set apart."""
+    curve, normals = line_on_plane(0.4)
+    line = voxelise(painted_stroke(curve, normals, noise_m=0.0005, seed=seed))
+    band = PolylineDistance(curve)
+    plate = patch((0.2, 0.0, 0.0), (0.26, 0.10), seed + 1)
+    d = band.distance(plate)
+    rng = np.random.default_rng(seed + 2)
+    spray = plate[(d > 0.0155) & (d < 0.045) & (rng.random(len(plate)) < 0.8)]
+    rust = plate[d >= 0.045]
+    stub, n2 = line_on_plane(0.07)
+    junk = voxelise(painted_stroke(stub + np.array([0.15, 0.075, 0.06]), n2, width_m=0.015, seed=3))
+    parts = {"line": line, "spray": spray, "rust": rust, "junk": junk}
+    mixed = tuple(0.5 * (np.asarray(PAINT) + np.asarray(RUST)))
+    rgbs = {"line": PAINT, "spray": mixed, "rust": RUST, "junk": RUST}
+    points, rgb, index = [], [], {}
+    start = 0
+    for k, (name, p) in enumerate(parts.items()):
+        points.append(p)
+        rgb.append(colour(len(p), rgbs[name], seed + 10 + k))
+        index[name] = np.arange(start, start + len(p))
+        start += len(p)
+    # Sight lines from a camera 0.3 m above each view centre along the line.
+    ends = curve[::40]
+    sights = np.stack([ends + np.array([0.0, 0.0, 0.3]), ends], axis=1)
+    return np.vstack(points), np.vstack(rgb), sights, index
+
+
+def test_overspray_past_a_strokes_width_still_finds_the_line() -> None:
+    points, rgb, sights, parts = overspray_scene()
+    # Paint and overspray together are wider than a stroke (the case this test is about).
+    band = np.concatenate([parts["line"], parts["spray"]])
+    loose = SelectionConfig(max_width_m=1.0)
+    assert select_line(points[band], None, sights, voxel_m=VOXEL, config=loose).line.width_m > 0.08
+    selection = select_line(points, rgb, sights, voxel_m=VOXEL)
+    line = selection.line
+    # The fresh paint's core, not the dull stroke off the piece the shape alone would leave.
+    assert np.isin(parts["line"], line.points).mean() > 0.95
+    assert np.isin(line.points, parts["junk"]).sum() == 0
+    assert line.width_m < 0.06 and line.follow > 0.9
+    assert line.hsv[1] > 0.9
+    junk = [c for c in selection.rejected if np.isin(c.points, parts["junk"]).mean() > 0.5]
+    assert junk and junk[0].kind in ("faded", "dull", "off_surface")
+
+
+def test_a_followed_blob_is_not_traded_for_a_stroke_the_scan_never_saw() -> None:
+    points, _, sights, parts = overspray_scene()
+    # Colours unknown: the paint's core cannot be set apart, so the band stays ~90 mm wide
+    # (a blob); the only stroke-like candidate is the stub the scan never followed.
+    keep = np.concatenate([parts["line"], parts["spray"], parts["junk"]])
+    with pytest.raises(PerceptionError) as info:
+        select_line(points[keep], None, sights, voxel_m=VOXEL)
+    message = str(info.value)
+    assert "the scan follows paint that is not shaped like a stroke" in message
+    assert "selection.max_width_m" in message and "\n" not in message

@@ -9,9 +9,11 @@ into candidates and keeps the line:
    histogram has a clear dip between two modes at least ``_MIN_MODE_GAP`` apart (fresh
    marking paint S ≈ 0.85–1 against rust or faded paint at 0.5–0.8), so a rust patch
    touching the line is not part of its candidate. Without such a dip there is one layer.
-   When there is one, the top layer's core (within four spreads of its mode) is set apart
-   from voxels that mix the paint with the duller colour (a sprayed edge, an overspray speck
-   on rust): those are never a line of their own, only the line's rim (step 5).
+   The paint's core (within four spreads of its mode) is then set apart from voxels that mix
+   the paint with a duller colour (a sprayed edge, an overspray speck on rust): those are
+   never a line of their own, only the line's rim (step 5). The mode is the one of the most
+   saturated candidate the scan follows, whatever its shape: heavy overspray widens the line
+   past a stroke's width until its core is set apart.
 2. **Candidates.** Within each layer, paint closer than ``link_m`` (measured between the
    centroids of a ``cell_m`` grid) is one candidate: a wire mesh's gaps are bridged, a crate
    beside the piece is not.
@@ -34,7 +36,9 @@ into candidates and keeps the line:
 6. **The pick.** Among the line-like candidates of the paint's colour near the scan:
    ``scan`` (default) the one the scan follows, ``longest``, ``nearest-start`` (nearest to the
    first sight line, where the worker pointed the robot) or ``all``. When more than one was
-   possible, a warning says so.
+   possible, a warning says so. When the scan follows paint of the line's colour that is not
+   shaped like a stroke more than twice as much as every stroke, no line is picked: the
+   stroke left is not what the scan followed.
 
 Every other candidate is reported with its kind (``faded``, ``dull``, ``mixed``, ``blob``,
 ``off_surface``, ``other_line``, ``speck``), size, colour and position, so a user sees what was
@@ -243,7 +247,7 @@ def select_line(
     ]
     # The line's own paint: the core of its colour cluster. What of a paint-coloured candidate
     # lies below it mixes the paint with something duller (rust touching it, a blurred edge).
-    reference = _reference(shapes, bool(len(centres)), config)
+    reference = _colour_reference(shapes, bool(len(centres)), config)
     core = paint_core(colour[reference.points, 1])
     if np.isfinite(core):
         ref_sat = colour[reference.points, 1]
@@ -253,7 +257,8 @@ def select_line(
         for shape in shapes:
             sat = colour[shape.points, 1]
             keep = ~(sat < core)  # NaN (unknown colour) stays
-            if shape.mixed or not _sat(shape) >= dull_below or keep.all():
+            dull = shape is not reference and not _sat(shape) >= dull_below
+            if shape.mixed or dull or keep.all():
                 refined.append(shape)
                 continue
             for part, mixed in ((shape.points[keep], False), (shape.points[~keep], True)):
@@ -462,6 +467,8 @@ def _classify(
     reference = _reference(shapes, scanned, config)
     paint_sat = _sat(reference)
     dull_below = paint_sat * (1.0 - config.dull_margin) if np.isfinite(paint_sat) else -np.inf
+    if scanned:
+        _check_followed(shapes, reference, dull_below, config)
     lines = [s for s in near if not _sat(s) < dull_below]
     picked = _pick(lines, reference, config.pick)
     kinds: dict[int, tuple[str, str]] = {}
@@ -533,6 +540,65 @@ def _reference(shapes: list[_Shape], scanned: bool, config: SelectionConfig) -> 
 
 #: A candidate the scan follows this share as much as the most followed one is followed too.
 _FOLLOWED = 0.5
+
+
+def _check_followed(
+    shapes: list[_Shape], reference: _Shape, dull_below: float, config: SelectionConfig
+) -> None:
+    """PerceptionError when paint of the line's colour that is not shaped like a stroke is
+    followed by the scan more than twice as much as the line: the scan followed that paint, so
+    a stroke the scan hardly looked at is not the marked line (a line the filter merged with
+    overspray or another paint past a stroke's width; cutting the small stroke would cut
+    elsewhere)."""
+    rivals = [
+        s
+        for s in shapes
+        if len(s.points) >= config.min_points
+        and not s.mixed
+        and not _sat(s) < dull_below
+        and s.scan_distance_m <= config.off_surface_m
+        and not _is_stroke(s, config)
+    ]
+    if not rivals:
+        return
+    rival = max(rivals, key=lambda s: s.follow)
+    if reference.follow >= _FOLLOWED * rival.follow:
+        return
+    raise PerceptionError(
+        f"the scan follows paint that is not shaped like a stroke ({_where(rival)} long, "
+        f"{1000 * rival.width_m:.0f} mm wide, {100 * rival.follow:.0f} % of the sight lines) "
+        f"more than the most stroke-like candidate ({_where(reference)}, "
+        f"{100 * reference.follow:.0f} %); a stroke is {config.min_elongation:g}x as long as "
+        f"wide and at most {1000 * config.max_width_m:.0f} mm wide (selection.min_elongation, "
+        "selection.max_width_m in --config); look at the mask with scrapcut filter --overlay"
+    )
+
+
+def _colour_reference(shapes: list[_Shape], scanned: bool, config: SelectionConfig) -> _Shape:
+    """The candidate whose colour is the line's paint, before the paint's core is set apart:
+    of the candidates the scan follows (at least half as much as the most followed one, any
+    shape), the most saturated; a line-like one among them instead when it is not duller than
+    that by ``dull_margin``. Heavy overspray or a sprayed edge widens the line past a stroke's
+    width until its core is set apart, so its shape cannot decide yet; without a scan, or
+    when nothing near the scan is big enough, as :func:`_reference`."""
+    near = [
+        s
+        for s in shapes
+        if len(s.points) >= config.min_points
+        and not s.mixed
+        and s.scan_distance_m <= config.off_surface_m
+    ]
+    most = max((s.follow for s in near), default=0.0)
+    if not scanned or most <= 0.0:
+        return _reference(shapes, scanned, config)
+    followed = [s for s in near if s.follow >= _FOLLOWED * most]
+    top = max(followed, key=lambda s: (np.nan_to_num(_sat(s)), s.follow, s.length_m))
+    strokes = [s for s in followed if _is_stroke(s, config)]
+    if strokes:
+        best = max(strokes, key=lambda s: (np.nan_to_num(_sat(s)), s.follow, s.length_m))
+        if not _sat(best) < _sat(top) * (1.0 - config.dull_margin):
+            return best
+    return top
 
 
 def _sat(s: _Shape) -> float:
