@@ -44,6 +44,20 @@ def colour(n: int, rgb: tuple[float, float, float], seed: int, sd: float = 0.01)
     return np.clip(np.asarray(rgb) + rng.normal(scale=sd, size=(n, 3)), 0.0, 1.0)
 
 
+def assemble(
+    parts: dict[str, np.ndarray], rgbs: dict[str, tuple[float, float, float]], seed: int
+) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """(points, rgb, {part: indices}) of the named parts stacked in order, each coloured."""
+    points, rgb, index = [], [], {}
+    start = 0
+    for k, (name, p) in enumerate(parts.items()):
+        points.append(p)
+        rgb.append(colour(len(p), rgbs[name], seed + 10 + k))
+        index[name] = np.arange(start, start + len(p))
+        start += len(p)
+    return np.vstack(points), np.vstack(rgb), index
+
+
 def scene(*, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     """(points, rgb, view centres, {part: indices}) of the test scene."""
     curve, normals = s_curve_on_plane(0.4)
@@ -61,15 +75,8 @@ def scene(*, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[st
     crate = patch((0.2, 0.26, 0.15), (0.10, 0.06), seed + 3)
     parts = {"line": line, "rust": disc, "faded": faded, "crate": crate}
     rgbs = {"line": PAINT, "rust": RUST, "faded": FADED, "crate": (0.95, 0.38, 0.02)}
-    points, rgb, index = [], [], {}
-    start = 0
-    for k, (name, p) in enumerate(parts.items()):
-        points.append(p)
-        rgb.append(colour(len(p), rgbs[name], seed + 10 + k))
-        index[name] = np.arange(start, start + len(p))
-        start += len(p)
-    centres = curve[::100] + np.array([0.0, 0.0, 0.0])
-    return np.vstack(points), np.vstack(rgb), centres, index
+    points, rgb, index = assemble(parts, rgbs, seed)
+    return points, rgb, curve[::100], index
 
 
 def test_the_line_is_picked_and_the_rest_reported() -> None:
@@ -189,19 +196,13 @@ def overspray_scene(
     stub, n2 = line_on_plane(0.07)
     junk = voxelise(painted_stroke(stub + np.array([0.15, 0.075, 0.06]), n2, width_m=0.015, seed=3))
     parts = {"line": line, "spray": spray, "rust": rust, "junk": junk}
-    mixed = tuple(0.5 * (np.asarray(PAINT) + np.asarray(RUST)))
+    mixed = (0.715, 0.33, 0.085)  # half paint, half rust: S 0.88
     rgbs = {"line": PAINT, "spray": mixed, "rust": RUST, "junk": RUST}
-    points, rgb, index = [], [], {}
-    start = 0
-    for k, (name, p) in enumerate(parts.items()):
-        points.append(p)
-        rgb.append(colour(len(p), rgbs[name], seed + 10 + k))
-        index[name] = np.arange(start, start + len(p))
-        start += len(p)
+    points, rgb, index = assemble(parts, rgbs, seed)
     # Sight lines from a camera 0.3 m above each view centre along the line.
     ends = curve[::40]
     sights = np.stack([ends + np.array([0.0, 0.0, 0.3]), ends], axis=1)
-    return np.vstack(points), np.vstack(rgb), sights, index
+    return points, rgb, sights, index
 
 
 def test_overspray_past_a_strokes_width_still_finds_the_line() -> None:
