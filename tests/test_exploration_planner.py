@@ -406,3 +406,42 @@ def test_a_ring_round_a_pipe_stops_at_the_arc_no_view_reaches() -> None:
     # Both directions ended where no view reached further.
     assert [e["direction"] for e in planner.ends] == [0, 1]
     assert 0.05 < final["loop"]["bridge_length_m"] < 0.25
+
+
+def test_a_crate_of_the_paints_colour_in_view_does_not_stop_the_skeleton() -> None:
+    """The first view sees the line and, 15 cm aside, a crate's top of the paint's colour: the
+    skeleton through all the paint falls apart, so the planner fits the marked line alone (as
+    `fit` selects it) and goes on instead of stopping with fit_failed."""
+    rng = np.random.default_rng(0)
+    g = np.arange(-0.3, 0.3001, 0.002)
+    x, y = np.meshgrid(g + 0.5, g)
+    plate = np.column_stack([x.ravel(), y.ravel(), rng.normal(0.0, 3e-4, x.size)])
+    line = plate[(np.abs(plate[:, 1]) <= 0.0125) & (np.abs(plate[:, 0] - 0.5) <= 0.2)]
+    crate = plate[(np.abs(plate[:, 0] - 0.5) <= 0.1) & (np.abs(plate[:, 1] - 0.2) <= 0.06)]
+    crate = crate + np.array([0.0, 0.0, 0.05])
+    surface = plate[np.abs(plate[:, 1]) > 0.0125]
+    paint = np.vstack([line, crate])
+    rgb = np.tile(np.float32([0.93, 0.40, 0.03]), (len(paint), 1))
+    rgb += rng.normal(0.0, 0.01, rgb.shape).astype(np.float32)
+    T = look_at([0.5, 0.0, 0.35], [0.5, 0.0, 0.0], up_hint=(1.0, 0.0, 0.0))
+    clouds = FrameClouds(
+        0,
+        1,
+        paint,
+        surface,
+        len(paint),
+        len(paint),
+        T,
+        paint_rgb=np.clip(rgb, 0, 1),
+        view_centre=np.array([0.5, 0.0, 0.0]),
+    )
+    planner = ExplorationPlanner(
+        T, reachable=REACH_ALL, hsv=ORANGE, config=_config(method="skeleton")
+    )
+    planner.start()
+    decision = planner.observe_perceived(Observation(0, 1, T, clouds, plate))
+    fit = decision.info["fit"]
+    assert "broken" in fit["error"]  # all the paint together: no skeleton
+    assert fit["selected_points"] > 0 and not decision.stop
+    assert decision.reason == "extrapolate"
+    assert fit["length_m"] == pytest.approx(0.4, abs=0.03)  # the line, not the crate

@@ -17,7 +17,11 @@ so the same frames and the same reachability answers give the same decisions, wh
 3. fits the curve (``nurbs`` or ``skeleton``) to the stitched paint around the frontier, thinned
    to ``fit_voxel_m``, and extrapolates from the end being explored (``fitting.extrapolate_end``:
    two points near the NURBS end, or the last two skeleton vertices; the curve's last 2 cm when
-   those two points turn away from it, as at a thinning fork);
+   those two points turn away from it, as at a thinning fork). When that fit fails (paint that
+   is not the line in view: a crate of the paint's colour, overspray on rust), it is fitted to
+   the marked line alone, picked among the stitched paint's candidates with the sight lines so
+   far as ``fit`` does (:mod:`~scrapcut_cli.perception.candidates`), before coarser skeleton
+   leaves are tried;
 4. chooses the next view: the target ``step_m`` beyond the curve's end (on a wall rising across
    the line's way, if the occupancy map shows one; then half a step, then the tip itself if no
    view of the farther target is feasible: the paper's conservative move towards the edge); the
@@ -411,6 +415,7 @@ class ExplorationPlanner:
         self._frontier: _End | None = None
         self._looked_back = False  # the frontier's end was looked at from over the line
         self._visited: list[FloatArray] = []
+        self._sights: list[FloatArray] = []  # (2, 3) camera centre, view centre per frame
         self._queries: list[ReachLog] = []
         self._reach_s = 0.0
         self._fit_note: dict[str, Any] = {}
@@ -455,6 +460,11 @@ class ExplorationPlanner:
         obs = observation
         growth = self._novel_growth(obs.clouds.paint_base)
         step = self.stitcher.add(obs.clouds, T_base_cam=obs.T_base_cam)
+        origin = obs.T_base_cam[:3, 3]
+        centre = obs.clouds.view_centre
+        self._sights.append(
+            np.stack([origin, origin + obs.T_base_cam[:3, 2] if centre is None else centre])
+        )
         self.tally.add(obs.clouds)
         self.base_frame = obs.base_frame
         self.occupancy.add(obs.obstacles_base)
@@ -1086,15 +1096,55 @@ class ExplorationPlanner:
             voxel = min(voxel, SKELETON_THINNING * self.config.skeleton.leaf_size_m)
         local = thin_points(paint[np.linalg.norm(paint - centre, axis=1) <= radius], voxel)
         self._fit_note = {"points": len(local), "radius_m": round(radius, 6)}
-        config = self.config
         attempts: list[SkeletonConfig | None] = [None]
         if self.method == "skeleton":
-            leaf = config.skeleton.leaf_size_m
+            leaf = self.config.skeleton.leaf_size_m
             attempts += [
-                dataclasses.replace(config.skeleton, leaf_size_m=r)
+                dataclasses.replace(self.config.skeleton, leaf_size_m=r)
                 for r in SKELETON_RETRY_LEAVES_M
                 if r > leaf
             ]
+        curve = self._fit_points(local, attempts[:1])
+        if curve is not None:
+            return curve
+        # Paint that is not the line (a crate of the paint's colour in view, overspray on rust)
+        # breaks the fit: the marked line alone, as `fit` selects it, is tried next (a coarser
+        # skeleton through everything would bridge to the crate); then the coarser leaves.
+        line = self._selected_line()
+        if line is not None:
+            near = thin_points(line[np.linalg.norm(line - centre, axis=1) <= radius], voxel)
+            self._fit_note["selected_points"] = len(near)
+            curve = self._fit_points(near, attempts)
+            if curve is not None:
+                return curve
+        return self._fit_points(local, attempts[1:])
+
+    def _selected_line(self) -> FloatArray | None:
+        """The stitched paint of the marked line: the first line ``select_line``
+        (:mod:`scrapcut_cli.perception.candidates`) picks from the paint, the duller clusters
+        and the sight lines so far; None when it finds none (the reason is logged)."""
+        from scrapcut_cli.perception.candidates import select_line
+
+        st = self.stitcher
+        points = np.vstack([st.paint_points, st.other_points])
+        try:
+            selection = select_line(
+                points,
+                np.vstack([st.paint_rgb, st.other_rgb]),
+                np.asarray(self._sights).reshape(-1, 2, 3),
+                voxel_m=self.config.stitch.voxel_size_m,
+                config=self.config.selection,
+            )
+        except PerceptionError as exc:
+            self._fit_note["selection_error"] = str(exc)
+            return None
+        return np.asarray(points[selection.line.points])
+
+    def _fit_points(self, local: FloatArray, attempts: list[SkeletonConfig | None]) -> Curve | None:
+        """The method's curve through ``local`` with the first of ``attempts`` (None: the
+        configured skeleton; else a coarser leaf) that fits, or None; the last error is noted
+        for the log."""
+        config = self.config
         for skeleton in attempts:
             trial = config if skeleton is None else dataclasses.replace(config, skeleton=skeleton)
             try:
