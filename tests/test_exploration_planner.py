@@ -445,3 +445,36 @@ def test_a_crate_of_the_paints_colour_in_view_does_not_stop_the_skeleton() -> No
     assert fit["selected_points"] > 0 and not decision.stop
     assert decision.reason == "extrapolate"
     assert fit["length_m"] == pytest.approx(0.4, abs=0.03)  # the line, not the crate
+
+
+def test_a_view_past_the_tip_without_paint_is_followed_by_a_view_of_the_tip() -> None:
+    """The view a step past the line's end saw no paint at all (a crate beside the piece
+    filled it): before the direction ends with paint_lost, the tip itself is looked at once."""
+    g = np.arange(-0.4, 0.4001, 0.004)
+    x, y = np.meshgrid(g + 0.5, g)
+    plate = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    band = plate[(np.abs(plate[:, 1]) <= 0.0125) & (np.abs(plate[:, 0] - 0.5) <= 0.1)]
+    surface = plate[np.abs(plate[:, 1]) > 0.0125]
+    T = look_at([0.5, 0.0, 0.3], [0.5, 0.0, 0.0], up_hint=(1.0, 0.0, 0.0))
+    first = FrameClouds(0, 1, band, surface, len(band), len(band), T)
+    planner = ExplorationPlanner(T, reachable=REACH_ALL, hsv=ORANGE)
+    planner.start()
+    past = planner.observe_perceived(Observation(0, 1, T, first, plate))
+    assert past.reason == "extrapolate" and past.info["end"]["step_fraction"] > 0
+    assert past.T_base_cam is not None
+    tip = np.asarray(past.info["end"]["tip"])
+
+    def nothing(k: int, pose: np.ndarray) -> Observation:
+        empty = FrameClouds(k, k + 1, np.zeros((0, 3)), surface, 0, 0, pose, skip_reason="no paint")
+        return Observation(k, k + 1, pose, empty, plate)
+
+    again = planner.observe_perceived(nothing(1, past.T_base_cam))
+    assert again.reason == "extrapolate" and again.info["view_axis"] == "tip"
+    assert again.info["end"]["target"] == pytest.approx(tip)
+    assert again.T_base_cam is not None
+    # The tip in view, the camera over it (along the plate's normal).
+    assert np.linalg.norm(again.T_base_cam[:2, 3] - tip[:2]) < 0.02
+    # No paint from over the tip either: the direction ends, once.
+    ended = planner.observe_perceived(nothing(2, again.T_base_cam))
+    assert ended.reason == "paint_lost"
+    assert planner.ends[0]["reason"] == "paint_lost"

@@ -52,13 +52,15 @@ painted side only from there). A next target within
 positions; it counts as an endpoint). After the first end the camera returns to the initial view
 and explores the other direction; the second end stops the run ("done"). A run also stops, with
 the reason, on the step budget; a direction also ends when no view is feasible, the paint is
-lost or the fit fails. When no view past an end is feasible, the end still counts as an
-endpoint if a frame taken so far observed it (``observed_end``,
-:mod:`~scrapcut_cli.exploration.evidence`: the tip well inside that image and the depth past
-it showing bare surface, or the surface ending in sight, not the image border or an occluding
-edge); the evidence, for or against, is logged with the step (``end_evidence``) and the end's
-entry names the frame (``observed_by``). Otherwise the direction ends with
-``no_feasible_view``.
+lost or the fit fails. The paint counts as lost only from over the tip: when a view past it saw
+no paint at all (a crate or a cone beside the piece may fill the view, or the view looked past
+the piece's edge), the tip itself is looked at once first (``view_axis`` ``tip``). When no
+view past an end is feasible, the end still counts as an endpoint if a frame taken so far
+observed it (``observed_end``, :mod:`~scrapcut_cli.exploration.evidence`: the tip well inside
+that image and the depth past it showing bare surface, or the surface ending in sight, not the
+image border or an occluding edge); the evidence, for or against, is logged with the step
+(``end_evidence``) and the end's entry names the frame (``observed_by``). Otherwise the
+direction ends with ``no_feasible_view``.
 
 Calibration views (``calibration_views`` > 0): once both directions are done, the planner
 visits that many views of the initial stretch of paint, tilted round its normal by
@@ -414,6 +416,7 @@ class ExplorationPlanner:
         self._initial_ends: list[_End] = []
         self._frontier: _End | None = None
         self._looked_back = False  # the frontier's end was looked at from over the line
+        self._step_fraction = 0.0  # of the step past the frontier the last view went
         self._visited: list[FloatArray] = []
         self._sights: list[FloatArray] = []  # (2, 3) camera centre, view centre per frame
         self._queries: list[ReachLog] = []
@@ -576,7 +579,8 @@ class ExplorationPlanner:
             # The line ran into the paint explored from the other side: a loop, closed.
             return self._finish(LOOP_CLOSED)
         if obs.clouds.skipped:
-            return self._end_direction("paint_lost")
+            tip = self._view_tip() if pending == "extrapolate" else None
+            return tip if tip is not None else self._end_direction("paint_lost")
         if growth <= c.delta_size:
             look = None
             if pending == "extrapolate" and c.look_past:
@@ -669,6 +673,7 @@ class ExplorationPlanner:
                 T = self.find_view(target, outward, end.direction, keep_in_view=end.tip)
                 if T is not None:
                     self._visited.append(target)
+                    self._step_fraction = fraction
                     self._pending = "extrapolate"
                     info = {
                         "action": "extrapolate",
@@ -680,6 +685,32 @@ class ExplorationPlanner:
         if evidence is not None and evidence.observed:
             return self._end_direction("endpoint", evidence=evidence)
         return self._end_direction("no_feasible_view", evidence=evidence)
+
+    def _view_tip(self) -> Decision | None:
+        """After a view past the frontier that saw no paint at all: a view of the frontier's
+        tip itself, along the surface normal there, once per frontier; None when the view went
+        no farther than the tip, a view of it was taken or none is feasible.
+
+        A frame without paint beyond a tip the fit extrapolated is no evidence of the line's
+        end when the view looked past it: the camera may have looked at something standing
+        beside the piece (a crate, a cone: closer than the surface, it fills the view) or past
+        the piece's edge. From over the tip the camera sees whether the paint goes on.
+        """
+        c = self.config.exploration
+        end = self._frontier
+        if end is None or self._step_fraction <= 0.0:
+            return None
+        self._step_fraction = 0.0
+        if any(np.linalg.norm(end.tip - v) < c.revisit_radius_m for v in self._visited):
+            return None
+        normal = self._normal_at(end.tip, fallback=end.tip)
+        T = self.find_view(end.tip, normal, end.direction, keep_in_view=end.tip)
+        if T is None:
+            return None
+        self._visited.append(end.tip)
+        self._pending = "extrapolate"
+        info = {"action": "extrapolate", "end": _end_dict(end, end.tip, 0.0), "view_axis": "tip"}
+        return Decision(T, "extrapolate", info=info)
 
     def _observed_end(self, end: _End) -> EndEvidence | None:
         """Whether a frame taken so far observed the line's end at ``end`` (None when
