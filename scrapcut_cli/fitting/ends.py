@@ -24,7 +24,10 @@ back to where the full-width band stops:
    curve (10 % quantile above 0.37 of the median; a band's is 0.2) have no band edge:
    "no band", kept.
 2. **The end window.** The dense paint ends where a run of h/2 along the line holds less than
-   half the band's points within the band's width (a halo is sparser); the window runs from
+   half the band's points within the band's width (a halo is sparser; the band's density is
+   the line's, or the one over four half widths before the end's window where that is
+   lower: a steep face seen at a grazing angle holds less paint, and its last stretch is
+   line, not halo); the window runs from
    three half widths (plus the profile's reach, where P falls below 5 %) before it, half a
    half width beyond that end or at the paint's tip if sooner. Its points are placed by their
    position x along the curve extended straight past its end and their offset d across the
@@ -130,8 +133,11 @@ _INSIDE = (0.2, 0.6)
 #: Density levels (share of the band's) below which the paint is no band, above which all
 #: band, when the edge is placed.
 _EDGE_LEVEL = 0.3
-#: The dense paint ends where a run of this many half widths holds less than half the band's.
+#: The dense paint ends where a run of this many half widths holds less than half the band's
+#: (the band's over the whole line, or over this many half widths before the end's window when
+#: it is sparser there).
 _DENSE_RUN = 0.5
+_LOCAL_SPAN = 4.0
 #: Integration step of the end model's normalisation, metres.
 _STEP_M = 0.001
 #: The end's grid search: a coarse step over the whole range, then a fine one around its best.
@@ -294,7 +300,14 @@ def stroke_ends(
     # The start is the end of the mirrored positions.
     for sign, paint_tip in ((-1.0, -lo), (1.0, hi)):
         p = sign * pos
-        tip = min(paint_tip, _dense_end(p[strip], per_metre, half=half) + _DENSE_RUN * half)
+        # The band just before where a cap and its halo can reach sets the density the end's
+        # paint is measured against when it is sparser there than on average (a steep face
+        # seen at a grazing angle, an end few frames saw): the line's sparse last stretch is
+        # no halo.
+        before = paint_tip - _WINDOW * half - reach
+        local = _density(p[strip], before - _LOCAL_SPAN * half, before, floor=sign * middle)
+        dense = _dense_end(p[strip], min(per_metre, local), half=half)
+        tip = min(paint_tip, dense + _DENSE_RUN * half)
         start = max(tip - _WINDOW * half - reach, sign * middle)
         window = np.flatnonzero((p >= start) & near)
         lateral, off_plane = _in_band_plane(points[window], extended, arc[window])
@@ -391,6 +404,14 @@ def _is_band(dist: FloatArray, pos: FloatArray, lo: float, hi: float, half: floa
         return True
     q10, q50 = np.quantile(dist[inner], [0.1, 0.5], method="inverted_cdf")
     return bool(q10 <= _BAND_SHAPE * q50)
+
+
+def _density(p: FloatArray, lo: float, hi: float, *, floor: float) -> float:
+    """Points per metre of the positions ``p`` (M,) in [lo, hi]; +inf when the stretch
+    reaches below ``floor`` (the line's middle: a short line has no band before its end)."""
+    if lo < floor or hi <= lo:
+        return float(np.inf)
+    return float(np.count_nonzero((p >= lo) & (p <= hi)) / (hi - lo))
 
 
 def _dense_end(p: FloatArray, per_metre: float, *, half: float) -> float:
