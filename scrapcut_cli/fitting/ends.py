@@ -134,8 +134,8 @@ _INSIDE = (0.2, 0.6)
 #: band, when the edge is placed.
 _EDGE_LEVEL = 0.3
 #: The dense paint ends where a run of this many half widths holds less than half the band's
-#: (the band's over the whole line, or over this many half widths before the end's window when
-#: it is sparser there).
+#: density: the whole line's, or the one over ``_LOCAL_SPAN`` half widths just before the end's
+#: window when it is sparser there.
 _DENSE_RUN = 0.5
 _LOCAL_SPAN = 4.0
 #: Integration step of the end model's normalisation, metres.
