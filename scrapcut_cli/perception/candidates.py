@@ -565,9 +565,9 @@ def _check_followed(
     if reference.follow >= _FOLLOWED * rival.follow:
         return
     raise PerceptionError(
-        f"the scan follows paint that is not shaped like a stroke ({_where(rival)} long, "
+        f"the scan follows paint that is not shaped like a stroke (at {_where(rival)} long, "
         f"{1000 * rival.width_m:.0f} mm wide, {100 * rival.follow:.0f} % of the sight lines) "
-        f"more than the most stroke-like candidate ({_where(reference)}, "
+        f"more than the most stroke-like candidate (at {_where(reference)} long, "
         f"{100 * reference.follow:.0f} %); a stroke is {config.min_elongation:g}x as long as "
         f"wide and at most {1000 * config.max_width_m:.0f} mm wide (selection.min_elongation, "
         "selection.max_width_m in --config); look at the mask with scrapcut filter --overlay"
