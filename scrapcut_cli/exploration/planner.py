@@ -17,11 +17,11 @@ so the same frames and the same reachability answers give the same decisions, wh
 3. fits the curve (``nurbs`` or ``skeleton``) to the stitched paint around the frontier, thinned
    to ``fit_voxel_m``, and extrapolates from the end being explored (``fitting.extrapolate_end``:
    two points near the NURBS end, or the last two skeleton vertices; the curve's last 2 cm when
-   those two points turn away from it, as at a thinning fork). When that fit fails (paint that
-   is not the line in view: a crate of the paint's colour, overspray on rust), it is fitted to
-   the marked line alone, picked among the stitched paint's candidates with the sight lines so
-   far as ``fit`` does (:mod:`~scrapcut_cli.perception.candidates`), before coarser skeleton
-   leaves are tried;
+   those two points turn away from it, as at a thinning fork). When that fit fails at every
+   skeleton leaf (paint that is not the line in view: a crate of the paint's colour, overspray
+   on rust), it is fitted to the marked line alone, picked among the stitched paint's
+   candidates with the sight lines so far as ``fit`` does
+   (:mod:`~scrapcut_cli.perception.candidates`);
 4. chooses the next view: the target ``step_m`` beyond the curve's end (on a wall rising across
    the line's way, if the occupancy map shows one; then half a step, then the tip itself if no
    view of the farther target is feasible: the paper's conservative move towards the edge); the
@@ -1135,20 +1135,17 @@ class ExplorationPlanner:
                 for r in SKELETON_RETRY_LEAVES_M
                 if r > leaf
             ]
-        curve = self._fit_points(local, attempts[:1])
+        curve = self._fit_points(local, attempts)
         if curve is not None:
             return curve
         # Paint that is not the line (a crate of the paint's colour in view, overspray on rust)
-        # breaks the fit: the marked line alone, as `fit` selects it, is tried next (a coarser
-        # skeleton through everything would bridge to the crate); then the coarser leaves.
+        # can break every fit: the marked line alone, as `fit` selects it, is tried last.
         line = self._selected_line()
-        if line is not None:
-            near = thin_points(line[np.linalg.norm(line - centre, axis=1) <= radius], voxel)
-            self._fit_note["selected_points"] = len(near)
-            curve = self._fit_points(near, attempts)
-            if curve is not None:
-                return curve
-        return self._fit_points(local, attempts[1:])
+        if line is None:
+            return None
+        near = thin_points(line[np.linalg.norm(line - centre, axis=1) <= radius], voxel)
+        self._fit_note["selected_points"] = len(near)
+        return self._fit_points(near, attempts)
 
     def _selected_line(self) -> FloatArray | None:
         """The stitched paint of the marked line: the first line ``select_line``
