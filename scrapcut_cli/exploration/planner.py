@@ -418,7 +418,6 @@ class ExplorationPlanner:
         self._looked_back = False  # the frontier's end was looked at from over the line
         self._step_fraction = 0.0  # of the step past the frontier the last view went
         self._visited: list[FloatArray] = []
-        self._sights: list[FloatArray] = []  # (2, 3) camera centre, view centre per frame
         self._queries: list[ReachLog] = []
         self._reach_s = 0.0
         self._fit_note: dict[str, Any] = {}
@@ -463,11 +462,6 @@ class ExplorationPlanner:
         obs = observation
         growth = self._novel_growth(obs.clouds.paint_base)
         step = self.stitcher.add(obs.clouds, T_base_cam=obs.T_base_cam)
-        origin = obs.T_base_cam[:3, 3]
-        centre = obs.clouds.view_centre
-        self._sights.append(
-            np.stack([origin, origin + obs.T_base_cam[:3, 2] if centre is None else centre])
-        )
         self.tally.add(obs.clouds)
         self.base_frame = obs.base_frame
         self.occupancy.add(obs.obstacles_base)
@@ -1159,7 +1153,7 @@ class ExplorationPlanner:
             selection = select_line(
                 points,
                 np.vstack([st.paint_rgb, st.other_rgb]),
-                np.asarray(self._sights).reshape(-1, 2, 3),
+                st.views,
                 voxel_m=self.config.stitch.voxel_size_m,
                 config=self.config.selection,
             )

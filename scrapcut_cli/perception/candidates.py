@@ -509,14 +509,23 @@ def _classify(
 
 def _line_like(shapes: list[_Shape], scanned: bool, config: SelectionConfig) -> list[_Shape]:
     """Candidates shaped like a stroke, big enough, near the scan, not mixed colour."""
+    return [s for s in _near_scan(shapes, scanned, config) if _is_stroke(s, config)]
+
+
+def _near_scan(shapes: list[_Shape], scanned: bool, config: SelectionConfig) -> list[_Shape]:
+    """Candidates big enough, not mixed colour and (with a scan) near a sight line."""
     return [
         s
         for s in shapes
         if len(s.points) >= config.min_points
         and not s.mixed
-        and _is_stroke(s, config)
         and (not scanned or s.scan_distance_m <= config.off_surface_m)
     ]
+
+
+def _most_saturated(shapes: list[_Shape]) -> _Shape:
+    """The most saturated candidate (then the most followed, the longest)."""
+    return max(shapes, key=lambda s: (np.nan_to_num(_sat(s)), s.follow, s.length_m))
 
 
 def _is_stroke(s: _Shape, config: SelectionConfig) -> bool:
@@ -535,7 +544,7 @@ def _reference(shapes: list[_Shape], scanned: bool, config: SelectionConfig) -> 
     if scanned:
         most = max(s.follow for s in near)
         near = [s for s in near if s.follow >= _FOLLOWED * most]
-    return max(near, key=lambda s: (np.nan_to_num(_sat(s)), s.follow, s.length_m))
+    return _most_saturated(near)
 
 
 #: A candidate the scan follows this share as much as the most followed one is followed too.
@@ -552,12 +561,8 @@ def _check_followed(
     elsewhere)."""
     rivals = [
         s
-        for s in shapes
-        if len(s.points) >= config.min_points
-        and not s.mixed
-        and not _sat(s) < dull_below
-        and s.scan_distance_m <= config.off_surface_m
-        and not _is_stroke(s, config)
+        for s in _near_scan(shapes, True, config)
+        if not _sat(s) < dull_below and not _is_stroke(s, config)
     ]
     if not rivals:
         return
@@ -581,21 +586,15 @@ def _colour_reference(shapes: list[_Shape], scanned: bool, config: SelectionConf
     that by ``dull_margin``. Heavy overspray or a sprayed edge widens the line past a stroke's
     width until its core is set apart, so its shape cannot decide yet; without a scan, or
     when nothing near the scan is big enough, as :func:`_reference`."""
-    near = [
-        s
-        for s in shapes
-        if len(s.points) >= config.min_points
-        and not s.mixed
-        and s.scan_distance_m <= config.off_surface_m
-    ]
+    near = _near_scan(shapes, True, config)
     most = max((s.follow for s in near), default=0.0)
     if not scanned or most <= 0.0:
         return _reference(shapes, scanned, config)
     followed = [s for s in near if s.follow >= _FOLLOWED * most]
-    top = max(followed, key=lambda s: (np.nan_to_num(_sat(s)), s.follow, s.length_m))
+    top = _most_saturated(followed)
     strokes = [s for s in followed if _is_stroke(s, config)]
     if strokes:
-        best = max(strokes, key=lambda s: (np.nan_to_num(_sat(s)), s.follow, s.length_m))
+        best = _most_saturated(strokes)
         if not _sat(best) < _sat(top) * (1.0 - config.dull_margin):
             return best
     return top

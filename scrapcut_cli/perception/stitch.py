@@ -257,6 +257,7 @@ class Stitcher:
         self._other = _VoxelMap(config.voxel_size_m, option="--stitch-voxel-mm")
         self._edges = _VoxelMap(config.voxel_size_m, option="--stitch-voxel-mm")
         self.steps: list[StitchStep] = []
+        self._sights: list[FloatArray] = []
 
     @property
     def size(self) -> int:
@@ -269,6 +270,13 @@ class Stitcher:
     @property
     def paint_viewpoints(self) -> FloatArray:
         return self._paint.viewpoints.copy()
+
+    @property
+    def views(self) -> FloatArray:
+        """(K, 2, 3) each added frame's sight line, base frame: its camera centre (the pose
+        it was added with, before ICP) and its view centre (a metre along the optical axis when
+        the axis met no surface)."""
+        return np.asarray(self._sights, dtype=np.float64).reshape(-1, 2, 3)
 
     @property
     def paint_rgb(self) -> FloatArray:
@@ -317,6 +325,9 @@ class Stitcher:
         """
         pose = clouds.T_base_cam if T_base_cam is None else np.asarray(T_base_cam, np.float64)
         k = len(self.steps)
+        origin = np.asarray(pose[:3, 3], dtype=np.float64)
+        centre = clouds.view_centre
+        self._sights.append(np.stack([origin, origin + pose[:3, 2] if centre is None else centre]))
         before = self.size
         icp: IcpOutcome | None = None
         paint, surface = clouds.paint_base, clouds.surface_base
@@ -599,15 +610,10 @@ def stitch_recording(
     stitcher = Stitcher(config.stitch, perception=config.perception)
     tally = PerceptionTally(hsv)
     base_frame = ""
-    centres: list[FloatArray] = []
-    origins: list[FloatArray] = []
     for frame in frames:
         base_frame = frame.base_frame
         clouds = process_frame(frame, hsv, config.perception)
         tally.add(clouds, frame.color)
-        origins.append(clouds.T_base_cam[:3, 3].copy())
-        centre = clouds.view_centre
-        centres.append(centre if centre is not None else origins[-1] + clouds.T_base_cam[:3, 2])
         step = stitcher.add(clouds, T_base_cam=frame.T_base_cam)
         if progress is not None:
             progress(step)
@@ -622,8 +628,8 @@ def stitch_recording(
         hsv=hsv,
         base_frame=base_frame,
         paint_rgb=stitcher.paint_rgb,
-        view_centres=np.asarray(centres, dtype=np.float64).reshape(-1, 3),
-        view_origins=np.asarray(origins, dtype=np.float64).reshape(-1, 3),
+        view_centres=stitcher.views[:, 1].copy(),
+        view_origins=stitcher.views[:, 0].copy(),
         other_points=stitcher.other_points,
         other_rgb=stitcher.other_rgb,
         **stitcher.kept_clouds(),
