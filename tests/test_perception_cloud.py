@@ -35,10 +35,12 @@ from scrapcut_cli.perception.cloud import (
     PerceptionTally,
     backproject_paint,
     backproject_pixels,
+    boundary_pixels,
     check_perception_config,
     process_frame,
     reject_isolated_pixels,
     reject_small_blobs,
+    sorted_union,
     split_wide_blobs,
     usable_depth_pixels,
 )
@@ -459,3 +461,26 @@ def test_stroke_edges_are_where_paint_meets_metal_not_a_hole(hole_depth: float |
     inner = (x > (155 - 319.5) * pixel) & (x < (245 - 319.5) * pixel)
     assert not on_top[inner].any()
     assert np.all(np.abs(edges[:, 2] - 0.3) < 0.001)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_boundary_pixels_are_those_with_a_4_neighbour_outside_the_set(seed: int) -> None:
+    """Against the definition pixel by pixel, on random sets that touch every image border."""
+    rng = np.random.default_rng(seed)
+    shape = (13, 17)
+    mask = rng.random(shape) < 0.6
+    mask[0, :] = mask[-1, :] = mask[:, 0] = mask[:, -1] = True  # borders: outside the image
+    pixels = np.flatnonzero(mask)
+    padded = np.pad(mask, 1)
+    inside = padded[:-2, 1:-1] & padded[2:, 1:-1] & padded[1:-1, :-2] & padded[1:-1, 2:]
+    expected = np.flatnonzero(mask & ~inside)
+    np.testing.assert_array_equal(boundary_pixels(pixels, shape), expected)
+    assert boundary_pixels(pixels[:0], shape).size == 0
+
+
+def test_sorted_union_is_numpys_union_of_ascending_pixel_sets() -> None:
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        a = np.unique(rng.integers(0, 500, rng.integers(0, 60)))
+        b = np.unique(rng.integers(0, 500, rng.integers(0, 60)))
+        np.testing.assert_array_equal(sorted_union(a, b), np.union1d(a, b))

@@ -482,11 +482,27 @@ def boundary_pixels(pixels: NDArray[np.intp], shape: tuple[int, ...]) -> NDArray
     height, width = int(shape[0]), int(shape[1])
     if pixels.size == 0:
         return pixels
-    mask = np.zeros((height + 2, width + 2), dtype=bool)
-    v, u = np.divmod(pixels, width)
-    mask[v + 1, u + 1] = True
-    inside = mask[v, u + 1] & mask[v + 2, u + 1] & mask[v + 1, u] & mask[v + 1, u + 2]
+    # A mask padded by one pixel all round, flat: np.take on it is several times faster than
+    # 2-D fancy indexing.
+    stride = width + 2
+    mask = np.zeros((height + 2) * stride, dtype=bool)
+    padded = pixels + 2 * (pixels // width) + stride + 1
+    mask[padded] = True
+    inside = np.take(mask, padded - 1)
+    inside &= np.take(mask, padded + 1)
+    inside &= np.take(mask, padded - stride)
+    inside &= np.take(mask, padded + stride)
     return pixels[~inside]
+
+
+def sorted_union(a: NDArray[np.intp], b: NDArray[np.intp]) -> NDArray[np.intp]:
+    """The sorted union of two ascending arrays of pixel indices (np.union1d's result):
+    a stable sort of the two runs merges them in linear time, where np.union1d hashes."""
+    merged = np.concatenate([a, b])
+    merged.sort(kind="stable")
+    if merged.size < 2:
+        return merged
+    return merged[np.concatenate([[True], merged[1:] != merged[:-1]])]
 
 
 def sampling_stride(frame: Frame, pixels: NDArray[np.intp], voxel_m: float) -> int:
@@ -786,7 +802,7 @@ def process_frame(frame: Frame, hsv: HsvRange, config: PerceptionConfig) -> Fram
     paint, paint_rgb = _thin(frame, points, pixels, config)
     # The other paint (duller colour clusters, blobs too wide for a stroke), to be reported:
     # noise dropped, downsampled; no outlier removal.
-    solid_other = np.union1d(
+    solid_other = sorted_union(
         reject_isolated_pixels(duller, frame.depth.shape, min_neighbors=config.min_paint_neighbors),
         wide,
     )

@@ -180,16 +180,28 @@ class _VoxelMap:
         self.counts[pos[found]] += counts[found]
         self.frames[pos[found]] += 1
         new = ~found
-        at = pos[new]
-        self.keys = np.insert(self.keys, at, keys[new])
-        self.sums = np.insert(self.sums, at, sums[new], axis=0)
-        self.rgb_sums = np.insert(self.rgb_sums, at, rgb_sums[new], axis=0)
-        self.counts = np.insert(self.counts, at, counts[new])
-        self.frames = np.insert(self.frames, at, 1)
-        self.viewpoints = np.insert(
-            self.viewpoints, at, np.broadcast_to(viewpoint, (int(new.sum()), 3)), axis=0
-        )
-        return int(new.sum())
+        n_new = int(new.sum())
+        if n_new == 0:
+            return 0
+        # np.insert's result, computed once for the six arrays: the new voxels go to their
+        # insertion points shifted by the new voxels before them, the old ones fill the rest.
+        at = pos[new] + np.arange(n_new)
+        old = np.ones(self.keys.size + n_new, dtype=bool)
+        old[at] = False
+
+        def merged(current: NDArray[Any], added: ArrayLike) -> NDArray[Any]:
+            out = np.empty((old.size, *current.shape[1:]), dtype=current.dtype)
+            out[old] = current
+            out[at] = added
+            return out
+
+        self.keys = merged(self.keys, keys[new])
+        self.sums = merged(self.sums, sums[new])
+        self.rgb_sums = merged(self.rgb_sums, rgb_sums[new])
+        self.counts = merged(self.counts, counts[new])
+        self.frames = merged(self.frames, 1)
+        self.viewpoints = merged(self.viewpoints, viewpoint)
+        return n_new
 
 
 def check_stitch_config(config: StitchConfig) -> None:

@@ -562,7 +562,8 @@ def _decode_compressed_color(msg: Any) -> NDArray[np.uint8]:
     data = np.asarray(msg.data, dtype=np.uint8).tobytes()
     try:
         with Image.open(io.BytesIO(data)) as img:
-            rgb = np.asarray(img.convert("RGB"))
+            # convert() copies even when the image is RGB already (a colour JPEG always is).
+            rgb = np.asarray(img if img.mode == "RGB" else img.convert("RGB"))
     except (UnidentifiedImageError, OSError) as exc:
         raise RecordingError(f"cannot decode compressed image ({msg.format!r}): {exc}") from None
     return np.ascontiguousarray(rgb)
@@ -592,8 +593,8 @@ def decode_depth(msg: Any, msgtype: str) -> NDArray[np.float32]:
 
 
 def _depth_from_mm(mm: NDArray[Any]) -> NDArray[np.float32]:
-    metres = mm.astype(np.float32)
-    metres *= np.float32(0.001)
+    # One pass: the cast to float32 happens inside the multiplication.
+    metres = np.multiply(mm, np.float32(0.001), dtype=np.float32)
     metres[mm == 0] = np.nan
     return metres
 

@@ -32,12 +32,19 @@ class _Edge:
     parent: str
     static: bool
     stamps: list[int]
-    translations: list[tuple[float, float, float]]
+    translations: list[tuple[float, ...]]
     quats: list[tuple[float, float, float, float]]
     # Sorted, de-duplicated arrays, built on first lookup.
     t: NDArray[np.int64] | None = None
     xyz: FloatArray | None = None
     rot: Rotation | None = None
+
+
+def _floats(value: ArrayLike, n: int) -> tuple[float, ...]:
+    """``value`` as a tuple of ``n`` Python floats (a tuple of floats passes through cheaply)."""
+    if type(value) is tuple and len(value) == n:
+        return tuple(map(float, value))
+    return tuple(np.asarray(value, dtype=np.float64).reshape(n).tolist())
 
 
 class TfBuffer:
@@ -65,13 +72,17 @@ class TfBuffer:
         """
         if parent == child:
             raise RecordingError(f"TF transform from frame {child!r} to itself")
-        t = np.asarray(translation, dtype=np.float64).reshape(3)
-        q = np.asarray(quat_xyzw, dtype=np.float64).reshape(4)
-        # Bounded before any arithmetic: 1e300 would overflow the norm.
-        bounded = np.all(np.abs(t) <= MAX_COORDINATE_M) and np.all(np.abs(q) <= 1e6)
-        norm = float(np.sqrt(q @ q)) if bounded else 0.0
+        # Plain floats, not numpy: a recording's /tf holds tens of thousands of transforms.
+        t = _floats(translation, 3)
+        q = _floats(quat_xyzw, 4)
+        # Bounded before any arithmetic: 1e300 would overflow the norm (NaN fails too).
+        bounded = all(abs(x) <= MAX_COORDINATE_M for x in t) and all(abs(x) <= 1e6 for x in q)
+        # numpy's dot, as the poses have always been normalised (the same bytes out).
+        norm = float(np.sqrt(np.dot(q, q))) if bounded else 0.0
         if not bounded or norm < 1e-9:
-            raise RecordingError(f"TF transform {parent} -> {child} is not a valid pose: {t}, {q}")
+            raise RecordingError(
+                f"TF transform {parent} -> {child} is not a valid pose: {list(t)}, {list(q)}"
+            )
         edge = self._edges.get(child)
         if edge is None:
             edge = _Edge(parent, static, [], [], [])
@@ -88,11 +99,11 @@ class TfBuffer:
         if static:
             # Timeless: the latest message from any publisher replaces the transform.
             edge.stamps[:] = [int(stamp_ns)]
-            edge.translations[:] = [(t[0], t[1], t[2])]
+            edge.translations[:] = [t]
             edge.quats[:] = [(q[0] / norm, q[1] / norm, q[2] / norm, q[3] / norm)]
         else:
             edge.stamps.append(int(stamp_ns))
-            edge.translations.append((t[0], t[1], t[2]))
+            edge.translations.append(t)
             edge.quats.append((q[0] / norm, q[1] / norm, q[2] / norm, q[3] / norm))
         edge.t = None
 
