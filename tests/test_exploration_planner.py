@@ -447,6 +447,49 @@ def test_a_crate_of_the_paints_colour_in_view_does_not_stop_the_skeleton() -> No
     assert fit["length_m"] == pytest.approx(0.4, abs=0.03)  # the line, not the crate
 
 
+@pytest.mark.parametrize("method", ["nurbs", "skeleton"])
+def test_a_corner_of_a_crate_past_the_lines_end_does_not_pull_the_fit(method: str) -> None:
+    """The first view sees the line (200 mm of it) and, 150 mm past its end and 130 mm lower, a
+    corner of a crate of the paint's colour (16 x 12 mm): a curve through all the paint runs to
+    it and the next view would look at the floor. The planner fits the marked line alone."""
+    rng = np.random.default_rng(1)
+    g = np.arange(-0.3, 0.3001, 0.002)
+    x, y = np.meshgrid(g + 0.5, g)
+    plate = np.column_stack([x.ravel(), y.ravel(), rng.normal(0.0, 3e-4, x.size)])
+    line = plate[(np.abs(plate[:, 1]) <= 0.0125) & (np.abs(plate[:, 0] - 0.5) <= 0.1)]
+    corner = np.column_stack(
+        [
+            c.ravel()
+            for c in np.meshgrid(np.arange(0.75, 0.766, 0.002), np.arange(0.0, 0.012, 0.002))
+        ]
+    )
+    corner = np.column_stack([corner, np.full(len(corner), -0.13)])
+    surface = plate[np.abs(plate[:, 1]) > 0.0125]
+    paint = np.vstack([line, corner])
+    rgb = np.tile(np.float32([0.93, 0.40, 0.03]), (len(paint), 1))
+    rgb += rng.normal(0.0, 0.01, rgb.shape).astype(np.float32)
+    T = look_at([0.55, 0.0, 0.35], [0.55, 0.0, 0.0], up_hint=(1.0, 0.0, 0.0))
+    clouds = FrameClouds(
+        0,
+        1,
+        paint,
+        surface,
+        len(paint),
+        len(paint),
+        T,
+        paint_rgb=np.clip(rgb, 0, 1),
+        view_centre=np.array([0.55, 0.0, 0.0]),
+    )
+    planner = ExplorationPlanner(T, reachable=REACH_ALL, hsv=ORANGE, config=_config(method=method))
+    planner.start()
+    decision = planner.observe_perceived(Observation(0, 1, T, clouds, plate))
+    fit = decision.info["fit"]
+    assert fit["off_line_points"] > 0 and fit["selected_points"] > 0
+    assert fit["length_m"] == pytest.approx(0.2, abs=0.02)  # the line, not on to the crate
+    tip = np.asarray(decision.info["end"]["tip"])
+    assert abs(tip[2]) < 0.01 and tip[0] < 0.62  # on the plate, at the line's end
+
+
 def test_a_view_past_the_tip_without_paint_is_followed_by_a_view_of_the_tip() -> None:
     """The view a step past the line's end saw no paint at all (a crate beside the piece
     filled it): before the direction ends with paint_lost, the tip itself is looked at once."""

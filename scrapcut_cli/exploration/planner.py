@@ -1129,15 +1129,27 @@ class ExplorationPlanner:
                 for r in SKELETON_RETRY_LEAVES_M
                 if r > leaf
             ]
-        curve = self._fit_points(local, attempts)
-        if curve is not None:
-            return curve
-        # Paint that is not the line (a crate of the paint's colour in view, overspray on rust)
-        # can break every fit: the marked line alone, as `fit` selects it, is tried last.
+        # Paint that is not the line (a crate or a cone of the paint's colour in view) bends
+        # the fit towards itself, or breaks it: where the window holds paint farther from the
+        # marked line than a stroke is wide (however little: a curve through all the points
+        # runs to a cluster of a dozen), the line alone, as `fit` selects it, is fitted first;
+        # the plain fit stays the fallback.
         line = self._selected_line()
-        if line is None:
-            return None
-        near = thin_points(line[np.linalg.norm(line - centre, axis=1) <= radius], voxel)
+        near = None
+        if line is not None:
+            near = thin_points(line[np.linalg.norm(line - centre, axis=1) <= radius], voxel)
+            off = _off_line(local, near, self.config.selection.max_width_m)
+            if off:
+                self._fit_note["off_line_points"] = off
+                self._fit_note["selected_points"] = len(near)
+                curve = self._fit_points(near, attempts)
+                if curve is not None:
+                    return curve
+        curve = self._fit_points(local, attempts)
+        if curve is not None or near is None or "selected_points" in self._fit_note:
+            return curve
+        # The plain fit can fail where too little of the other paint was seen to count: the
+        # marked line alone is tried last.
         self._fit_note["selected_points"] = len(near)
         return self._fit_points(near, attempts)
 
@@ -1217,6 +1229,17 @@ class ExplorationPlanner:
 
 
 # --------------------------------------------------------------------------- helpers
+
+
+def _off_line(local: FloatArray, line: FloatArray, distance_m: float) -> int:
+    """How many of the window's paint points ``local`` (N, 3) lie farther than ``distance_m``
+    from every point of the selected line's paint ``line`` (M, 3) in the same window."""
+    if len(line) == 0:
+        return len(local)
+    if len(local) == 0:
+        return 0
+    distance, _ = cKDTree(line).query(local, distance_upper_bound=distance_m)
+    return int(np.count_nonzero(~np.isfinite(distance)))
 
 
 def thin_points(points: ArrayLike, voxel_m: float) -> FloatArray:
