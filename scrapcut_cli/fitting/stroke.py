@@ -39,6 +39,13 @@ The recipe (:func:`stroke_model`):
    height over the surface comes from the edges and the paint near it (b offsets).
 6. **Twice**: the centres found (straight across the unknown stretches, smoothed over a half
    width) are the next provisional line, so cross sections are taken across the line itself.
+7. **The outer envelope** (:func:`_envelope`). On a layered mesh or grate the line is drawn on
+   the piece's outer envelope, where the torch cuts, but where it runs between the outer wires
+   the spray lands on the layer below. Where the stroke is perforated and the surface within
+   the perception's surface band rises above its paint on both sides of the line (by at most
+   a layer's depth) on the cameras' side, that outer surface is the envelope, and the paint
+   (``recentre``) and the centres are moved along its normal onto it. Solid strokes (steps,
+   flanges, grooves) and one-sided rises are left alone.
 
 Each section also gets its lateral uncertainty σ (metres): the spread of its edges' offsets
 over the square root of how many independent pieces of edge the window held, the width's
@@ -101,7 +108,10 @@ class StrokeObservations:
     surface around the paint (for the stations' frames and the confidence); ``paint_frames``
     (N,) and ``surface_frames`` (M,): how many frames saw each voxel (empty: unknown);
     ``voxel_m``: the stitching voxel of the paint and edges; ``paint_viewpoints`` (N,): the
-    camera centre that first saw each paint voxel (empty: unknown), which side is out.
+    camera centre that first saw each paint voxel (empty: unknown), which side is out;
+    ``envelope_reach_m``: how far around the line the surface was kept (the perception's
+    surface band), over which the piece's outer envelope is looked for on a layered mesh
+    (0: not looked for; see :func:`_envelope`).
     """
 
     edges: FloatArray
@@ -110,6 +120,7 @@ class StrokeObservations:
     surface_frames: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     voxel_m: float = 0.002
     paint_viewpoints: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    envelope_reach_m: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -136,6 +147,10 @@ class StrokeModel:
         Counts and the stroke's half width, for ``Curve.info``.
     voxel_m : float
         The stitching voxel of the paint and edges, metres.
+    envelope, envelope_normals : (K,) and (K, 3) float64
+        Where the paint lies on a layered mesh's lower layer: the outer envelope's height over
+        the station along its local outward normal (metres; NaN elsewhere, and both empty when
+        not looked for; :func:`_envelope`). ``recentre`` moves the paint onto it.
     """
 
     stations: FloatArray
@@ -148,6 +163,8 @@ class StrokeModel:
     sigma: FloatArray
     info: dict[str, Any] = field(default_factory=dict)
     voxel_m: float = 0.002
+    envelope: FloatArray = field(default_factory=lambda: np.zeros(0))
+    envelope_normals: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
 
     @property
     def known(self) -> NDArray[np.bool_]:
@@ -172,8 +189,9 @@ class StrokeModel:
         within ± ``STATION_M`` along and ``MAX_ACROSS`` half widths
         across counts; the shifts are interpolated across the stations without a centre or
         without paint, and smoothed over about a half width. The paint's extent along the line
-        (its ends) and its shape along it (a groove's dip) stay the paint's. A copy when the
-        model knows no centre."""
+        (its ends) and its shape along it (a groove's dip) stay the paint's. Last, paint below
+        a layered mesh's outer envelope is moved onto it (:meth:`onto_envelope`). A copy when
+        the model knows no centre."""
         cloud = np.asarray(paint, dtype=np.float64).reshape(-1, 3)
         known = self.known
         if len(self.stations) < 2 or len(cloud) == 0 or not known.any():
@@ -231,9 +249,23 @@ class StrokeModel:
             ]
         )
         shifts = moving_average(shifts, window) * taper[:, None]
-        return np.asarray(
-            cloud + shifts[k, 0, None] * self.lateral[k] + shifts[k, 1, None] * self.normals[k]
+        moved = cloud + shifts[k, 0, None] * self.lateral[k] + shifts[k, 1, None] * self.normals[k]
+        return self.onto_envelope(moved, k)
+
+    def onto_envelope(self, points: ArrayLike, station: NDArray[np.int64]) -> FloatArray:
+        """``points`` (N, 3) below the outer envelope of their ``station`` (N,) moved along its
+        normal onto it (a layered mesh's lower-layer paint up to where the torch cuts); the
+        others, and every point where no envelope was found, unchanged."""
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if len(self.envelope) != len(self.stations) or len(pts) == 0:
+            return pts
+        k = np.clip(np.asarray(station, dtype=np.int64), 0, len(self.stations) - 1)
+        n = self.envelope_normals[k]
+        below = np.nan_to_num(self.envelope[k], nan=-np.inf) - np.einsum(
+            "ij,ij->i", pts - self.stations[k], n
         )
+        lift = np.where(np.isfinite(below) & (below > 0.0), below, 0.0)
+        return np.asarray(pts + lift[:, None] * n)
 
     def line(self) -> FloatArray:
         """The centre line (K, 3): known centres, straight across the unknown stretches (the
@@ -282,7 +314,9 @@ def stroke_model(
             break
         line = _smooth_line(model.line(), guess)
     assert model is not None
-    return model
+    return _with_envelope(
+        model, paint, surface, observations.envelope_reach_m, observations.paint_viewpoints
+    )
 
 
 # --------------------------------------------------------------------------- provisional line
@@ -678,6 +712,229 @@ def _slab_quantiles(
         picked = vs[np.clip(at, 0, max(len(vs) - 1, 0))] if len(vs) else np.zeros(n)
         out.append(np.where(count >= 5, picked, np.nan))
     return out[0], out[1]
+
+
+# --------------------------------------------------------------------------- outer envelope
+
+
+#: A perforated stroke: under this share of a full band's paint voxels within the reach along
+#: the line (a mesh's wires or a grate's bars carry the paint, the openings between them do
+#: not). A solid stroke — on a plate, a step, a groove, a flange — fills most of its band.
+PERFORATED_SHARE = 0.5
+#: The outer surface on each side of the line: this quantile of the heights of the points
+#: there along the local normal (the outer wires' tops; a few stray points above them do not
+#: count) ...
+ENVELOPE_QUANTILE = 0.9
+#: ... from at least this many points on each side (the line must be bracketed: a surface
+#: higher on one side only is a step or a flange beside the line, not an envelope over it).
+ENVELOPE_MIN_POINTS = 5
+#: A mesh's or a grate's lower layer lies at most this far below its outer one (its top lies
+#: one wire or bar below: crossed wires or bars up to 12 mm thick): a larger lift would move
+#: the line onto another surface. Also
+#: the thickest slab the points around a station may fill for one local plane to fit them
+#: (twice its RMS thickness): past a piece's edge or in a corner they fill more.
+MAX_LAYER_DEPTH_M = 0.012
+#: Along the line the lift onto the envelope comes in over this length at either end of a
+#: lifted stretch (twice the paper's 5 mm skeleton leaf: a layer-deep step within a leaf or
+#: two would split a skeleton), and gaps up to this long between lifted stations are bridged.
+ENVELOPE_RAMP_M = 0.01
+#: The cameras must have seen the paint around a station from the same side of the surface
+#: (this share of its voxels at least) and from in front (their median sight line within 45°
+#: of the normal) for that side to be out.
+FACING_SHARE = 0.9
+FACING_COS = float(np.cos(np.radians(45.0)))
+
+
+def _with_envelope(
+    model: StrokeModel,
+    paint: FloatArray,
+    surface: FloatArray,
+    reach_m: float,
+    viewpoints: ArrayLike = (),
+) -> StrokeModel:
+    """``model`` with the outer envelope of a layered mesh (:func:`_envelope`) and its known
+    centres moved onto it."""
+    if reach_m <= 0.0 or len(model.stations) < 2:
+        return model
+    envelope, normals = _envelope(model, paint, surface, reach_m, viewpoints)
+    found = np.isfinite(envelope)
+    info = {**model.info, "envelope_sections": int(found.sum())}
+    if found.any():
+        lifted = np.nan_to_num(envelope[found]) - np.einsum(
+            "ij,ij->i", np.nan_to_num(model.centres[found]) - model.stations[found], normals[found]
+        )
+        info["envelope_lift_median_m"] = float(np.median(lifted))
+    model = replace(model, envelope=envelope, envelope_normals=normals, info=info)
+    centres = model.centres.copy()
+    known = model.known
+    centres[known] = model.onto_envelope(centres[known], np.flatnonzero(known))
+    return replace(model, centres=centres)
+
+
+def _envelope(
+    model: StrokeModel,
+    paint: FloatArray,
+    surface: FloatArray,
+    reach_m: float,
+    viewpoints: ArrayLike = (),
+) -> tuple[FloatArray, FloatArray]:
+    """The piece's outer envelope where the paint lies on a layered mesh's lower layer.
+
+    A torch cuts a mesh or a grate along its outer envelope, which the worker drew the line
+    on; the spray lands on whatever wire is under it, and where the line runs between the
+    outer wires that is the layer below. At each station, the points within ``reach_m`` (the
+    paint and the surface around it: every depth the perception kept) give a local plane
+    (principal axes) and its outward normal (:func:`_outward_normals`). The envelope is the
+    lower of the two sides' outer heights (``ENVELOPE_QUANTILE`` of the heights across the
+    line on each side, each from ``ENVELOPE_MIN_POINTS`` at least) and it counts only where
+    all of these hold:
+
+    - the points fit one plane: their RMS thickness is at most half ``MAX_LAYER_DEPTH_M`` (no
+      edge of the piece, no corner within the reach);
+    - the stroke is perforated: its band within the reach holds under ``PERFORATED_SHARE`` of
+      a full band's paint voxels (solid pieces — steps, flanges, grooves — are left alone);
+    - both sides rise above the paint (the median height of the band's paint), by at most
+      ``MAX_LAYER_DEPTH_M``; by more than a stitching voxel (a surface's own spread) here or
+      at a station within the reach along the line (where the line crosses an outer wire,
+      the band's paint lies on both layers and its median between them).
+
+    Gaps of up to ``ENVELOPE_RAMP_M`` between such stations take the nearest one's plane, and
+    the lift comes in linearly over ``ENVELOPE_RAMP_M`` at either end of a lifted stretch.
+
+    Returns the envelope's height over each station along that normal (K,) (NaN where it does
+    not count) and the normals (K, 3) (the station's own where it does not count).
+    """
+    stations = model.stations
+    k_count = len(stations)
+    heights = np.full(k_count, np.nan)
+    lifts = np.full(k_count, np.nan)
+    cloud = np.vstack([paint, surface]) if len(surface) else paint
+    if len(paint) < ENVELOPE_MIN_POINTS or k_count < 2:
+        return heights, model.normals.copy()
+    voxel = float(model.voxel_m)
+    half = max(float(np.median(model.half_width)), voxel)
+    # Paint voxels of a full band (both sides of the line) over the reach's length.
+    full = (2.0 * half / voxel) * (2.0 * reach_m / voxel)
+    near_cloud = cKDTree(cloud).query_ball_point(stations, reach_m)
+    near_paint = cKDTree(paint).query_ball_point(stations, reach_m)
+    planes = np.full((k_count, 3), np.nan)
+    for k in range(k_count):
+        if len(near_cloud[k]) < 3 * ENVELOPE_MIN_POINTS or not near_paint[k]:
+            continue
+        values, vectors = np.linalg.eigh(np.cov((cloud[near_cloud[k]] - stations[k]).T))
+        if np.sqrt(max(float(values[0]), 0.0)) <= 0.5 * MAX_LAYER_DEPTH_M:
+            planes[k] = vectors[:, 0]
+    normals = _outward_normals(model, planes, paint, near_paint, viewpoints)
+    s = cumulative_length(stations)
+    for k in np.flatnonzero(np.isfinite(normals[:, 0])).tolist():
+        n = normals[k]
+        # Across the line: the line's direction over the reach (a station's own tangent turns
+        # with the line's wiggles and hooks at its ends), in the plane.
+        run = stations[np.abs(s - s[k]) <= reach_m] - stations[k]
+        _, _, axes = np.linalg.svd(run - run.mean(axis=0), full_matrices=False)
+        t = axes[0] - float(np.dot(axes[0], n)) * n
+        a = np.cross(n, _unit(t))
+        pd = paint[near_paint[k]] - stations[k]
+        band = np.abs(pd @ a) <= half
+        if band.sum() >= PERFORATED_SHARE * full or not band.any():
+            continue
+        level = float(np.median(pd[band] @ n))
+        d = cloud[near_cloud[k]] - stations[k]
+        h, u = d @ n, d @ a
+        sides = [h[u < 0.0], h[u > 0.0]]
+        if min(len(side) for side in sides) < ENVELOPE_MIN_POINTS:
+            continue
+        outer = min(float(np.quantile(side, ENVELOPE_QUANTILE)) for side in sides)
+        if 0.0 < outer - level <= MAX_LAYER_DEPTH_M:
+            heights[k], lifts[k] = outer, outer - level
+    # A lift of a voxel or less counts only near a clear one: alone it is a surface's noise.
+    clear = np.flatnonzero(lifts > voxel)
+    if len(clear) == 0:
+        return np.full(k_count, np.nan), model.normals.copy()
+    keep = np.isfinite(lifts) & (_distance_to(s, clear) <= reach_m)
+    # A station or two between lifted ones (a gate failed there) takes its nearest lifted
+    # neighbour's plane, and the lift comes in gradually at either end of a lifted stretch:
+    # a step a layer deep within a voxel or two would split the path (a skeleton's voxels).
+    kept = np.flatnonzero(keep)
+    pos = np.searchsorted(kept, np.arange(k_count))
+    prev = kept[np.clip(pos - 1, 0, len(kept) - 1)]
+    nxt = kept[np.clip(pos, 0, len(kept) - 1)]
+    gap = ~keep & (pos > 0) & (pos < len(kept)) & (s[nxt] - s[prev] <= ENVELOPE_RAMP_M)
+    for k in np.flatnonzero(gap).tolist():
+        j = prev[k] if s[k] - s[prev[k]] <= s[nxt[k]] - s[k] else nxt[k]
+        on_plane = stations[j] + heights[j] * normals[j] - stations[k]
+        normals[k] = normals[j]
+        heights[k] = float(np.dot(on_plane, normals[j]))
+        lifts[k] = lifts[j]
+    keep |= gap
+    ramp = np.clip(_distance_to(s, np.flatnonzero(~keep)) / ENVELOPE_RAMP_M, 0.0, 1.0)
+    heights = np.where(keep, heights - (1.0 - ramp) * lifts, np.nan)
+    normals = np.where(keep[:, None], normals, model.normals)
+    return heights, normals
+
+
+def _distance_to(s: FloatArray, at: IntArray) -> FloatArray:
+    """Distance (K,) along the line from each station (arc lengths ``s``) to the nearest of
+    the stations ``at`` (ascending indices; inf when there are none)."""
+    if len(at) == 0:
+        return np.full(len(s), np.inf)
+    pos = np.searchsorted(s[at], s)
+    before = np.abs(s - s[at[np.clip(pos - 1, 0, len(at) - 1)]])
+    after = np.abs(s[at[np.clip(pos, 0, len(at) - 1)]] - s)
+    return np.asarray(np.minimum(before, after))
+
+
+def _outward_normals(
+    model: StrokeModel,
+    planes: FloatArray,
+    paint: FloatArray,
+    near_paint: Any,
+    viewpoints: ArrayLike,
+) -> FloatArray:
+    """Each station's plane normal (K, 3) turned out of the piece (NaN where no plane was fitted
+    or its outside stays unknown).
+
+    Out is the cameras' side where they looked at the surface from in front: the paint within
+    the reach seen from one side (``FACING_SHARE`` of its voxels) and within 45° of the normal
+    (median). A see-through piece is also seen from behind — a basket's side wall through its
+    top — and at grazing angles; there the side comes from the nearest station along the line
+    whose side is known (at j, normal n_j), as a closed surface has it: a face behind n_j's
+    plane turns over a convex edge and faces away from j, one in front of it over a concave
+    edge and faces towards j; a face in n_j's plane faces as n_j does. Without viewpoints,
+    the stations' own normals decide."""
+    cameras = np.asarray(viewpoints, dtype=np.float64).reshape(-1, 3)
+    fitted = np.isfinite(planes[:, 0])
+    out = np.full_like(planes, np.nan)
+    if len(cameras) != len(paint):
+        flip = np.einsum("ij,ij->i", np.nan_to_num(planes), model.normals) < 0.0
+        out[fitted] = np.where(flip[:, None], -planes, planes)[fitted]
+        return out
+    known = np.zeros(len(planes), dtype=bool)
+    for k in np.flatnonzero(fitted):
+        n = planes[k]
+        idx = near_paint[k]
+        sight = cameras[idx] - paint[idx]
+        facing = (sight @ n) / np.maximum(np.linalg.norm(sight, axis=1), 1e-12)
+        if np.median(facing) < 0.0:
+            n, facing = -n, -facing
+        out[k] = n
+        known[k] = np.mean(facing > 0.0) >= FACING_SHARE and np.median(facing) >= FACING_COS
+    if not known.any():
+        return np.full_like(planes, np.nan)
+    s = cumulative_length(model.stations)
+    ks = np.flatnonzero(known)
+    for k in np.flatnonzero(fitted & ~known):
+        j = int(ks[np.argmin(np.abs(s[ks] - s[k]))])
+        n, nj = out[k], out[j]
+        ahead = float(np.dot(model.stations[k] - model.stations[j], nj))
+        towards = float(np.dot(model.stations[j] - model.stations[k], n))
+        if abs(ahead) > MAX_LAYER_DEPTH_M and abs(towards) > MAX_LAYER_DEPTH_M:
+            out[k] = n if (towards > 0.0) == (ahead > 0.0) else -n
+        elif abs(float(np.dot(n, nj))) >= FACING_COS:
+            out[k] = n if float(np.dot(n, nj)) > 0.0 else -n
+        else:
+            out[k] = np.nan
+    return out
 
 
 def _unit(v: FloatArray) -> FloatArray:

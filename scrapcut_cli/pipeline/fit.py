@@ -453,6 +453,7 @@ def stroke_observations(
         surface_frames=stitch.surface_frames,
         voxel_m=config.stitch.voxel_size_m,
         paint_viewpoints=viewpoints,
+        envelope_reach_m=config.perception.surface_band_m,
     )
 
 
