@@ -23,7 +23,7 @@ from exploration_scenes import (
     reach_if,
 )
 
-from scrapcut_cli.cell import Reach, ReachAnswer, ReachQuery, ViewPlanner
+from scrapcut_cli.cell import Decision, Reach, ReachAnswer, ReachQuery, ViewPlanner
 from scrapcut_cli.config import ScrapcutConfig
 from scrapcut_cli.errors import ExplorationError
 from scrapcut_cli.evaluation.metrics import path_error
@@ -408,6 +408,38 @@ def test_a_ring_round_a_pipe_stops_at_the_arc_no_view_reaches() -> None:
     assert 0.05 < final["loop"]["bridge_length_m"] < 0.25
 
 
+def _first_decision(
+    line: np.ndarray,
+    other: np.ndarray,
+    plate: np.ndarray,
+    surface: np.ndarray,
+    *,
+    look_x: float,
+    method: str,
+    rng: np.random.Generator,
+) -> Decision:
+    """The planner's decision on one view from 35 cm above (look_x, 0, 0) that saw the line's
+    paint and ``other`` paint of its colour."""
+    paint = np.vstack([line, other])
+    rgb = np.tile(np.float32([0.93, 0.40, 0.03]), (len(paint), 1))
+    rgb += rng.normal(0.0, 0.01, rgb.shape).astype(np.float32)
+    T = look_at([look_x, 0.0, 0.35], [look_x, 0.0, 0.0], up_hint=(1.0, 0.0, 0.0))
+    clouds = FrameClouds(
+        0,
+        1,
+        paint,
+        surface,
+        len(paint),
+        len(paint),
+        T,
+        paint_rgb=np.clip(rgb, 0, 1),
+        view_centre=np.array([look_x, 0.0, 0.0]),
+    )
+    planner = ExplorationPlanner(T, reachable=REACH_ALL, hsv=ORANGE, config=_config(method=method))
+    planner.start()
+    return planner.observe_perceived(Observation(0, 1, T, clouds, plate))
+
+
 def test_a_crate_of_the_paints_colour_in_view_does_not_stop_the_skeleton() -> None:
     """The first view sees the line and, 15 cm aside, the top of a 30 x 20 x 15 cm crate of the
     paint's colour: the skeleton through all the paint falls apart at every leaf, so the
@@ -421,26 +453,7 @@ def test_a_crate_of_the_paints_colour_in_view_does_not_stop_the_skeleton() -> No
     crate = plate[(np.abs(plate[:, 0] - 0.5) <= 0.15) & (np.abs(plate[:, 1] - 0.25) <= 0.1)]
     crate = crate + np.array([0.0, 0.0, 0.15])
     surface = plate[np.abs(plate[:, 1]) > 0.0125]
-    paint = np.vstack([line, crate])
-    rgb = np.tile(np.float32([0.93, 0.40, 0.03]), (len(paint), 1))
-    rgb += rng.normal(0.0, 0.01, rgb.shape).astype(np.float32)
-    T = look_at([0.5, 0.0, 0.35], [0.5, 0.0, 0.0], up_hint=(1.0, 0.0, 0.0))
-    clouds = FrameClouds(
-        0,
-        1,
-        paint,
-        surface,
-        len(paint),
-        len(paint),
-        T,
-        paint_rgb=np.clip(rgb, 0, 1),
-        view_centre=np.array([0.5, 0.0, 0.0]),
-    )
-    planner = ExplorationPlanner(
-        T, reachable=REACH_ALL, hsv=ORANGE, config=_config(method="skeleton")
-    )
-    planner.start()
-    decision = planner.observe_perceived(Observation(0, 1, T, clouds, plate))
+    decision = _first_decision(line, crate, plate, surface, look_x=0.5, method="skeleton", rng=rng)
     fit = decision.info["fit"]
     assert fit["selected_points"] > 0 and not decision.stop  # all the paint: no skeleton
     assert decision.reason == "extrapolate"
@@ -451,38 +464,17 @@ def test_a_crate_of_the_paints_colour_in_view_does_not_stop_the_skeleton() -> No
 def test_a_corner_of_a_crate_past_the_lines_end_does_not_pull_the_fit(method: str) -> None:
     """The first view sees the line (200 mm of it) and, 150 mm past its end and 130 mm lower, a
     corner of a crate of the paint's colour (16 x 12 mm): a curve through all the paint runs to
-    it and the next view would look at the floor. The planner fits the marked line alone."""
+    it (NURBS: to 412 mm, its tip on the crate) and the next view would look at the floor. The
+    planner fits the marked line alone."""
     rng = np.random.default_rng(1)
     g = np.arange(-0.3, 0.3001, 0.002)
     x, y = np.meshgrid(g + 0.5, g)
     plate = np.column_stack([x.ravel(), y.ravel(), rng.normal(0.0, 3e-4, x.size)])
     line = plate[(np.abs(plate[:, 1]) <= 0.0125) & (np.abs(plate[:, 0] - 0.5) <= 0.1)]
-    corner = np.column_stack(
-        [
-            c.ravel()
-            for c in np.meshgrid(np.arange(0.75, 0.766, 0.002), np.arange(0.0, 0.012, 0.002))
-        ]
-    )
-    corner = np.column_stack([corner, np.full(len(corner), -0.13)])
+    u, v = np.meshgrid(np.arange(0.75, 0.766, 0.002), np.arange(0.0, 0.012, 0.002))
+    corner = np.column_stack([u.ravel(), v.ravel(), np.full(u.size, -0.13)])
     surface = plate[np.abs(plate[:, 1]) > 0.0125]
-    paint = np.vstack([line, corner])
-    rgb = np.tile(np.float32([0.93, 0.40, 0.03]), (len(paint), 1))
-    rgb += rng.normal(0.0, 0.01, rgb.shape).astype(np.float32)
-    T = look_at([0.55, 0.0, 0.35], [0.55, 0.0, 0.0], up_hint=(1.0, 0.0, 0.0))
-    clouds = FrameClouds(
-        0,
-        1,
-        paint,
-        surface,
-        len(paint),
-        len(paint),
-        T,
-        paint_rgb=np.clip(rgb, 0, 1),
-        view_centre=np.array([0.55, 0.0, 0.0]),
-    )
-    planner = ExplorationPlanner(T, reachable=REACH_ALL, hsv=ORANGE, config=_config(method=method))
-    planner.start()
-    decision = planner.observe_perceived(Observation(0, 1, T, clouds, plate))
+    decision = _first_decision(line, corner, plate, surface, look_x=0.55, method=method, rng=rng)
     fit = decision.info["fit"]
     assert fit["off_line_points"] > 0 and fit["selected_points"] > 0
     assert fit["length_m"] == pytest.approx(0.2, abs=0.02)  # the line, not on to the crate

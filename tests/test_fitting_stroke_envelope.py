@@ -16,6 +16,7 @@ only.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -140,14 +141,7 @@ def test_without_the_envelope_the_path_follows_the_lower_layer() -> None:
     # What the fix is for: the same mesh without the surface around the paint keeps the path
     # on the lower wires, a wire's thickness below the envelope.
     paint, observations = scene(mesh)
-    off = StrokeObservations(
-        edges=observations.edges,
-        surface=observations.surface,
-        voxel_m=observations.voxel_m,
-        paint_viewpoints=observations.paint_viewpoints,
-        envelope_reach_m=0.0,
-    )
-    model = stroke_model(paint, off)
+    model = stroke_model(paint, replace(observations, envelope_reach_m=0.0))
     assert len(model.envelope) == 0
     z = middle(fit_nurbs(paint, config=NurbsConfig(), stroke=model).points)[:, 2]
     assert z.mean() < -0.002
@@ -175,12 +169,6 @@ def test_a_mesh_seen_only_from_below_is_not_lifted_towards_the_camera_side() -> 
     # The outside is the cameras' side: a camera under the mesh (looking up through it) sees
     # the outer wires behind the paint, so there is nothing to lift towards it.
     paint, observations = scene(mesh)
-    below = StrokeObservations(
-        edges=observations.edges,
-        surface=observations.surface,
-        voxel_m=observations.voxel_m,
-        paint_viewpoints=np.broadcast_to(CAMERA * [1, 1, -1], paint.shape).copy(),
-        envelope_reach_m=REACH,
-    )
-    model = stroke_model(paint, below)
+    below = np.broadcast_to(CAMERA * [1, 1, -1], paint.shape).copy()
+    model = stroke_model(paint, replace(observations, paint_viewpoints=below))
     assert not np.isfinite(model.envelope).any()
