@@ -371,6 +371,36 @@ class PolylineDistance:
         return self.query(query_points)[0]
 
 
+def orient_over_edge(
+    normal: ArrayLike,
+    at: ArrayLike,
+    known_normal: ArrayLike,
+    known_at: ArrayLike,
+    *,
+    margin_m: float,
+    same_plane_cos: float,
+) -> FloatArray | None:
+    """``normal`` (3,) at ``at`` turned out of a closed surface, from a nearby point
+    ``known_at`` whose outward normal ``known_normal`` is known; None when it cannot tell.
+
+    A face behind the known face's plane (farther than ``margin_m``) lies past a convex edge and
+    faces away from the known point; one in front of it lies past a concave edge and faces
+    towards it; a face in that plane (normals within ``same_plane_cos``) faces as the known one
+    does. For a surface seen only from behind (a wire mesh's far wall through its near one) the
+    cameras' side is the wrong side; this is the side a closed piece has.
+    """
+    n = np.asarray(normal, dtype=np.float64)
+    nj = np.asarray(known_normal, dtype=np.float64)
+    offset = np.asarray(at, dtype=np.float64) - np.asarray(known_at, dtype=np.float64)
+    ahead = float(np.dot(offset, nj))
+    towards = -float(np.dot(offset, n))
+    if abs(ahead) > margin_m and abs(towards) > margin_m:
+        return n if (towards > 0.0) == (ahead > 0.0) else -n
+    if abs(float(np.dot(n, nj))) >= same_plane_cos:
+        return n if float(np.dot(n, nj)) > 0.0 else -n
+    return None
+
+
 def nearest_distances(points: ArrayLike, reference_points: ArrayLike) -> FloatArray:
     """Distance (N,) from each point to the nearest of ``reference_points`` (a point set)."""
     ref = np.asarray(reference_points, dtype=np.float64).reshape(-1, 3)

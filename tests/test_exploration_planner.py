@@ -513,3 +513,30 @@ def test_a_view_past_the_tip_without_paint_is_followed_by_a_view_of_the_tip() ->
     ended = planner.observe_perceived(nothing(2, again.T_base_cam))
     assert ended.reason == "paint_lost"
     assert planner.ends[0]["reason"] == "paint_lost"
+
+
+def test_a_wall_seen_only_through_the_top_is_viewed_from_outside() -> None:
+    """A wire basket's side wall seen from above, through its top: the cameras saw the wall at
+    a grazing angle from its inner side, so its normal comes out pointing into the basket,
+    where a view sees the wall's unpainted inner side. The normal is turned out of the piece
+    over the edge from the top, which was seen from in front."""
+    g = np.arange(-0.1, 0.1001, 0.004)
+    x, y = np.meshgrid(g + 0.5, g)
+    top = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    u, w = np.meshgrid(g + 0.5, np.arange(-0.15, -0.004, 0.004))
+    wall = np.column_stack([u.ravel(), np.full(u.size, -0.1), w.ravel()])
+    line = top[(np.abs(top[:, 0] - 0.5) <= 0.0125) & (top[:, 1] >= -0.1)]
+    surface = np.vstack([top[np.abs(top[:, 0] - 0.5) > 0.0125], wall])
+    T = look_at([0.5, 0.05, 0.35], [0.5, 0.05, 0.0], up_hint=(1.0, 0.0, 0.0))
+    clouds = FrameClouds(
+        0, 1, line, surface, len(line), len(line), T, view_centre=np.array([0.5, 0.05, 0.0])
+    )
+    planner = ExplorationPlanner(T, reachable=REACH_ALL, hsv=ORANGE)
+    planner.start()
+    planner.observe_perceived(Observation(0, 1, T, clouds, np.vstack([top, wall])))
+    on_wall = np.array([0.5, -0.1, -0.06])
+    normal = planner._normal_at(on_wall, fallback=on_wall)
+    assert normal[1] < -0.9  # out of the basket, not into it
+    # What the cameras' side alone gives (the reason for the rule):
+    inward, _, front = planner._surface_normal(on_wall, on_wall)
+    assert inward[1] > 0.9 and not front

@@ -137,3 +137,28 @@ def test_voxel_keys_pack_round_trip() -> None:
 def test_voxel_keys_floor_negative_coordinates() -> None:
     keys = g.voxel_keys(np.array([[-0.0001, 0.0001, -0.0021]]), 0.002)
     np.testing.assert_array_equal(keys, [[-1, 0, -2]])
+
+
+@pytest.mark.parametrize("flip", [False, True])
+def test_orient_over_edge_turns_a_normal_out_of_a_closed_piece(flip: bool) -> None:
+    """A box's top (normal +z known at the origin) and its faces past its edges, whatever sign
+    the normal came with: past a convex edge the side wall faces away from the top, past a
+    concave one (a wall rising from the top) towards it, in the top's plane as the top."""
+    sign = -1.0 if flip else 1.0
+    up = np.array([0.0, 0.0, 1.0])
+    top = np.zeros(3)
+    cos = np.cos(np.radians(45.0))
+
+    def orient(normal: list[float], at: list[float]) -> np.ndarray | None:
+        return g.orient_over_edge(
+            sign * np.array(normal), np.array(at), up, top, margin_m=0.012, same_plane_cos=cos
+        )
+
+    # Down the side wall at y = -0.05, 30 mm below the top: out is -y.
+    np.testing.assert_allclose(orient([0.0, 1.0, 0.0], [0.0, -0.05, -0.03]), [0, -1, 0])
+    # Up a wall rising at y = -0.05 from the top (a flange): out faces the top's side, +y.
+    np.testing.assert_allclose(orient([0.0, 1.0, 0.0], [0.0, -0.05, 0.03]), [0, 1, 0])
+    # Further along the top: as the top.
+    np.testing.assert_allclose(orient([0.0, 0.1, 0.99], [0.0, -0.05, 0.001]), [0, 0.1, 0.99])
+    # A steep face within the margin of the top's plane: no telling.
+    assert orient([0.0, 1.0, 0.0], [0.0, -0.05, 0.005]) is None

@@ -113,6 +113,7 @@ from scrapcut_cli.geometry import (
     cumulative_length,
     interpolate_polyline,
     matrix_to_quat_xyzw,
+    orient_over_edge,
     pack_voxel_keys,
     transform_from_pose,
     voxel_keys,
@@ -152,6 +153,12 @@ WALL_BEHIND_M = 0.02
 WALL_HALF_WIDTH_M = 0.05
 #: A fallback viewing direction within ~15 degrees of the normal adds nothing.
 FALLBACK_COS = float(np.cos(np.radians(15.0)))
+#: A surface counts as seen from in front when the median sight line of the cameras that saw
+#: it lies within 45 degrees of its normal; and two normals this close lie in one plane.
+FRONT_COS = float(np.cos(np.radians(45.0)))
+#: Offsets along a normal within this are in its plane when orienting a normal over an edge (a
+#: mesh's layers, a surface's noise).
+ORIENT_MARGIN_M = 0.012
 #: The local fit window grows up to this radius while the end it finds lies at its rim.
 FIT_MAX_RADIUS_M = 0.5
 #: The skeleton's local fit thins the paint to at most this share of its leaf size.
@@ -417,6 +424,9 @@ class ExplorationPlanner:
         self._frontier: _End | None = None
         self._looked_back = False  # the frontier's end was looked at from over the line
         self._step_fraction = 0.0  # of the step past the frontier the last view went
+        # This direction's last tip whose surface the cameras saw from in front, and its normal.
+        self._front: tuple[FloatArray, FloatArray] | None = None
+        self._initial_front: tuple[FloatArray, FloatArray] | None = None
         self._visited: list[FloatArray] = []
         self._queries: list[ReachLog] = []
         self._reach_s = 0.0
@@ -560,6 +570,10 @@ class ExplorationPlanner:
             curve = self._local_fit(centre, radius)
             if curve is None:
                 return self._stop("fit_failed")
+            # Both directions set out from the first view's paint, seen from in front (usually).
+            normal, where, front = self._surface_normal(centre, centre)
+            if front and where is not None:
+                self._initial_front = self._front = (where, normal)
             self._initial_ends = [self._end_of(curve, "end"), self._end_of(curve, "start")]
             self._direction = 0
             return self._advance(self._initial_ends[0])
@@ -629,6 +643,9 @@ class ExplorationPlanner:
         c = self.config.exploration
         self._frontier = end
         self._looked_back = False
+        normal, where, front = self._surface_normal(end.tip, end.tip)
+        if front and where is not None:
+            self._front = (where, normal)  # this direction's last tip seen from in front
         tip_normal = self._normal_at(end.tip, fallback=end.tip)
         candidates: list[tuple[float, FloatArray, FloatArray]] = []
         if self._rises_ahead(end, tip_normal):
@@ -782,6 +799,7 @@ class ExplorationPlanner:
             return self._finish(final)
         self._direction = 1
         self._frontier = self._initial_ends[1]
+        self._front = self._initial_front
         if self._pending in ("initial", "return"):
             # Still at the initial view: no need to go back to it.
             return self._advance(self._initial_ends[1])
@@ -1059,7 +1077,33 @@ class ExplorationPlanner:
 
     def _normal_at(self, point: FloatArray, *, fallback: FloatArray) -> FloatArray:
         """Outward unit normal (3,) of the observed surface at ``point`` (else at ``fallback``,
-        else towards the camera of the last frame)."""
+        else towards the camera of the last frame).
+
+        Its side is the cameras' where they saw the surface there from in front. Where they
+        saw it only from behind or at a grazing angle (a wire basket's side wall, seen through
+        its top from above), the side comes from the last tip of this direction that was seen
+        from in front, over the edge between them (:func:`~scrapcut_cli.geometry.orient_over_edge`:
+        the side a closed piece has)."""
+        normal, where, front = self._surface_normal(point, fallback)
+        if front or where is None or self._front is None:
+            return normal
+        known_at, known_normal = self._front
+        oriented = orient_over_edge(
+            normal,
+            where,
+            known_normal,
+            known_at,
+            margin_m=ORIENT_MARGIN_M,
+            same_plane_cos=FRONT_COS,
+        )
+        return normal if oriented is None else unit(oriented)
+
+    def _surface_normal(
+        self, point: FloatArray, fallback: FloatArray
+    ) -> tuple[FloatArray, FloatArray | None, bool]:
+        """The normal at ``point`` or ``fallback`` oriented towards the cameras that saw the
+        surface there, where it was estimated (None: the last camera's axis) and whether those
+        cameras looked at it from in front (median sight line within 45 degrees of it)."""
         c = self.config.exploration
         surface, viewpoints = self._observed_surface()
         for at in (point, fallback):
@@ -1074,8 +1118,11 @@ class ExplorationPlanner:
                 min_points=MIN_NORMAL_POINTS,
             )
             if estimate.supported[0]:
-                return unit(estimate.normals[0])
-        return unit(-self._last_pose[:3, 2])
+                normal = unit(estimate.normals[0])
+                sight = viewpoints[box] - surface[box]
+                facing = (sight @ normal) / np.maximum(np.linalg.norm(sight, axis=1), 1e-12)
+                return normal, at, bool(np.median(facing) >= FRONT_COS)
+        return unit(-self._last_pose[:3, 2]), None, False
 
     # ------------------------------------------------------------------ growth and fitting
 

@@ -69,7 +69,12 @@ from scipy.spatial import cKDTree
 from scrapcut_cli.fitting._common import arc_positions, follows_input_order, moving_average
 from scrapcut_cli.fitting.curve import LOW_SUPPORT, Curve, CurveConfidence
 from scrapcut_cli.fitting.ordering import geodesic_positions
-from scrapcut_cli.geometry import cumulative_length, interpolate_polyline, resample_polyline
+from scrapcut_cli.geometry import (
+    cumulative_length,
+    interpolate_polyline,
+    orient_over_edge,
+    resample_polyline,
+)
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -925,15 +930,15 @@ def _outward_normals(
     ks = np.flatnonzero(known)
     for k in np.flatnonzero(fitted & ~known):
         j = int(ks[np.argmin(np.abs(s[ks] - s[k]))])
-        n, nj = out[k], out[j]
-        ahead = float(np.dot(model.stations[k] - model.stations[j], nj))
-        towards = float(np.dot(model.stations[j] - model.stations[k], n))
-        if abs(ahead) > MAX_LAYER_DEPTH_M and abs(towards) > MAX_LAYER_DEPTH_M:
-            out[k] = n if (towards > 0.0) == (ahead > 0.0) else -n
-        elif abs(float(np.dot(n, nj))) >= FACING_COS:
-            out[k] = n if float(np.dot(n, nj)) > 0.0 else -n
-        else:
-            out[k] = np.nan
+        oriented = orient_over_edge(
+            out[k],
+            model.stations[k],
+            out[j],
+            model.stations[j],
+            margin_m=MAX_LAYER_DEPTH_M,
+            same_plane_cos=FACING_COS,
+        )
+        out[k] = np.nan if oriented is None else oriented
     return out
 
 
