@@ -371,6 +371,17 @@ class PolylineDistance:
         return self.query(query_points)[0]
 
 
+def sight_cosines(points: ArrayLike, viewpoints: ArrayLike, normal: ArrayLike) -> FloatArray:
+    """Cosine (N,) of the angle between ``normal`` (3,) and each point's sight line towards the
+    camera that saw it (``points`` and ``viewpoints`` (N, 3)): 1 seen head-on, 0 edge-on,
+    negative from behind."""
+    sight = np.asarray(viewpoints, dtype=np.float64) - np.asarray(points, dtype=np.float64)
+    return np.asarray(
+        (sight @ np.asarray(normal, dtype=np.float64))
+        / np.maximum(np.linalg.norm(sight, axis=1), 1e-12)
+    )
+
+
 def orient_over_edge(
     normal: ArrayLike,
     at: ArrayLike,

@@ -115,6 +115,7 @@ from scrapcut_cli.geometry import (
     matrix_to_quat_xyzw,
     orient_over_edge,
     pack_voxel_keys,
+    sight_cosines,
     transform_from_pose,
     voxel_keys,
 )
@@ -427,6 +428,8 @@ class ExplorationPlanner:
         # This direction's last tip whose surface the cameras saw from in front, and its normal.
         self._front: tuple[FloatArray, FloatArray] | None = None
         self._initial_front: tuple[FloatArray, FloatArray] | None = None
+        # (stitched frames, the selected line's paint or None, why none) of the last selection.
+        self._line_cache: tuple[int, FloatArray | None, str | None] | None = None
         self._visited: list[FloatArray] = []
         self._queries: list[ReachLog] = []
         self._reach_s = 0.0
@@ -646,7 +649,7 @@ class ExplorationPlanner:
         normal, where, front = self._surface_normal(end.tip, end.tip)
         if front and where is not None:
             self._front = (where, normal)  # this direction's last tip seen from in front
-        tip_normal = self._normal_at(end.tip, fallback=end.tip)
+        tip_normal = self._outward(normal, where, front)
         candidates: list[tuple[float, FloatArray, FloatArray]] = []
         if self._rises_ahead(end, tip_normal):
             wall_target = end.tip + 0.5 * c.step_m * tip_normal
@@ -1084,7 +1087,11 @@ class ExplorationPlanner:
         its top from above), the side comes from the last tip of this direction that was seen
         from in front, over the edge between them (:func:`~scrapcut_cli.geometry.orient_over_edge`:
         the side a closed piece has)."""
-        normal, where, front = self._surface_normal(point, fallback)
+        return self._outward(*self._surface_normal(point, fallback))
+
+    def _outward(self, normal: FloatArray, where: FloatArray | None, front: bool) -> FloatArray:
+        """A normal from :meth:`_surface_normal`, turned out of the piece over the edge from
+        this direction's last tip seen from in front where the cameras did not see it so."""
         if front or where is None or self._front is None:
             return normal
         known_at, known_normal = self._front
@@ -1119,8 +1126,7 @@ class ExplorationPlanner:
             )
             if estimate.supported[0]:
                 normal = unit(estimate.normals[0])
-                sight = viewpoints[box] - surface[box]
-                facing = (sight @ normal) / np.maximum(np.linalg.norm(sight, axis=1), 1e-12)
+                facing = sight_cosines(surface[box], viewpoints[box], normal)
                 return normal, at, bool(np.median(facing) >= FRONT_COS)
         return unit(-self._last_pose[:3, 2]), None, False
 
@@ -1182,18 +1188,18 @@ class ExplorationPlanner:
         # runs to a cluster of a dozen), the line alone, as `fit` selects it, is fitted first;
         # the plain fit stays the fallback.
         line = self._selected_line()
-        near = None
-        if line is not None:
-            near = thin_points(line[np.linalg.norm(line - centre, axis=1) <= radius], voxel)
-            off = _off_line(local, near, self.config.selection.max_width_m)
-            if off:
-                self._fit_note["off_line_points"] = off
-                self._fit_note["selected_points"] = len(near)
-                curve = self._fit_points(near, attempts)
-                if curve is not None:
-                    return curve
+        if line is None:
+            return self._fit_points(local, attempts)
+        near = thin_points(line[np.linalg.norm(line - centre, axis=1) <= radius], voxel)
+        off = _off_line(local, near, self.config.selection.max_width_m)
+        if off:
+            self._fit_note["off_line_points"] = off
+            self._fit_note["selected_points"] = len(near)
+            curve = self._fit_points(near, attempts)
+            if curve is not None:
+                return curve
         curve = self._fit_points(local, attempts)
-        if curve is not None or near is None or "selected_points" in self._fit_note:
+        if curve is not None or off:
             return curve
         # The plain fit can fail where too little of the other paint was seen to count: the
         # marked line alone is tried last.
@@ -1203,23 +1209,28 @@ class ExplorationPlanner:
     def _selected_line(self) -> FloatArray | None:
         """The stitched paint of the marked line: the first line ``select_line``
         (:mod:`scrapcut_cli.perception.candidates`) picks from the paint, the duller clusters
-        and the sight lines so far; None when it finds none (the reason is logged)."""
+        and the sight lines so far; None when it finds none (the reason is logged). Selected
+        once per stitched frame: a decision's growing fit windows share it."""
         from scrapcut_cli.perception.candidates import select_line
 
         st = self.stitcher
-        points = np.vstack([st.paint_points, st.other_points])
-        try:
-            selection = select_line(
-                points,
-                np.vstack([st.paint_rgb, st.other_rgb]),
-                st.views,
-                voxel_m=self.config.stitch.voxel_size_m,
-                config=self.config.selection,
-            )
-        except PerceptionError as exc:
-            self._fit_note["selection_error"] = str(exc)
-            return None
-        return np.asarray(points[selection.line.points])
+        if self._line_cache is None or self._line_cache[0] != len(st.steps):
+            points = np.vstack([st.paint_points, st.other_points])
+            try:
+                selection = select_line(
+                    points,
+                    np.vstack([st.paint_rgb, st.other_rgb]),
+                    st.views,
+                    voxel_m=self.config.stitch.voxel_size_m,
+                    config=self.config.selection,
+                )
+                self._line_cache = (len(st.steps), points[selection.line.points], None)
+            except PerceptionError as exc:
+                self._line_cache = (len(st.steps), None, str(exc))
+        _, line, error = self._line_cache
+        if error is not None:
+            self._fit_note["selection_error"] = error
+        return line
 
     def _fit_points(self, local: FloatArray, attempts: list[SkeletonConfig | None]) -> Curve | None:
         """The method's curve through ``local`` with the first of ``attempts`` (None: the

@@ -74,6 +74,7 @@ from scrapcut_cli.geometry import (
     interpolate_polyline,
     orient_over_edge,
     resample_polyline,
+    sight_cosines,
 )
 
 FloatArray = NDArray[np.float64]
@@ -918,8 +919,7 @@ def _outward_normals(
     for k in np.flatnonzero(fitted):
         n = planes[k]
         idx = near_paint[k]
-        sight = cameras[idx] - paint[idx]
-        facing = (sight @ n) / np.maximum(np.linalg.norm(sight, axis=1), 1e-12)
+        facing = sight_cosines(paint[idx], cameras[idx], n)
         if np.median(facing) < 0.0:
             n, facing = -n, -facing
         out[k] = n
