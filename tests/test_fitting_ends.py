@@ -117,6 +117,31 @@ def test_a_sparse_last_stretch_of_line_is_not_taken_for_a_halo():
     assert max(trims) < 0.015
 
 
+def test_a_curve_between_a_meshs_wires_is_not_cut_back_within_its_paint() -> None:
+    from scrapcut_cli.fitting.ends import past_paint
+
+    # A 25 mm stroke on a mesh: paint only on 4 mm wires across it every 40 mm (the first
+    # across the start's cap, 9 mm before the line begins, narrowed to its chord) and on one
+    # wire along the line at the band's edge, 11 mm aside. The curve follows the stroke's
+    # centre from x = 0: its first 25 mm lie more than 4 mm from any paint, but within the
+    # paint's extent along it, and stay; its 30 mm past the last wire are cut back.
+    rng = np.random.default_rng(5)
+    wires = []
+    for x0 in np.arange(-0.009, 0.30, 0.04):
+        half = np.sqrt(0.0125**2 - x0**2) if x0 < 0 else 0.0125
+        x = x0 + rng.uniform(-0.002, 0.002, 150)
+        wires.append(np.column_stack([x, rng.uniform(-half, half, 150), np.zeros(150)]))
+    x = rng.uniform(-0.004, 0.30, 600)
+    wires.append(np.column_stack([x, -0.011 + rng.uniform(-0.002, 0.002, 600), np.zeros(600)]))
+    paint = np.vstack(wires)
+    xs = np.linspace(0.0, 0.321, 322)
+    curve = np.column_stack([xs, np.zeros_like(xs), np.zeros_like(xs)])
+    check = past_paint(curve, paint, tolerance_m=0.004)
+    assert check.trims[0] == 0.0
+    assert check.trims[1] == pytest.approx(0.321 - 0.293 - 0.004, abs=0.003)
+    assert 0.006 < check.reverse_max_m < 0.012  # measured over the gaps all the same
+
+
 def test_a_square_end_is_kept():
     # Paint that runs off an edge stops square at full width: the line ends at the paint's edge
     # (clean, dense paint: on ragged sparse paint a square end is told from a cap only about

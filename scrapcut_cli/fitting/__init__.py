@@ -127,8 +127,9 @@ def fit_line(
 
 
 def trim_to_paint(curve: Curve, paint_base: ArrayLike, *, tolerance_m: float) -> Curve:
-    """``curve`` without what runs past the paint ``paint_base`` (N, 3) at its ends by more
-    than ``tolerance_m`` (``fitting.ends.past_paint``), NURBS model included; ``info`` gains
+    """``curve`` without what runs past the paint ``paint_base`` (N, 3) at its ends: beyond the
+    paint's extent along it and by more than ``tolerance_m`` (``fitting.ends.past_paint``),
+    NURBS model included; ``info`` gains
     ``paint_trim_m`` (per end), ``reverse_mean_m`` and ``reverse_max_m`` (curve to paint).
     A closed curve is not trimmed (it has no ends); its reverse distance is reported."""
     paint = np.asarray(paint_base, dtype=np.float64).reshape(-1, 3)

@@ -78,7 +78,12 @@ from numpy.typing import NDArray
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from scrapcut_cli.errors import FittingError
-from scrapcut_cli.fitting._common import arc_positions, extended_polyline, extent_of
+from scrapcut_cli.fitting._common import (
+    arc_positions,
+    extended_polyline,
+    extended_positions,
+    extent_of,
+)
 from scrapcut_cli.geometry import (
     cumulative_length,
     interpolate_polyline,
@@ -146,6 +151,9 @@ _FINE_M = 0.00025
 #: Slices along the window (metres), and the empty run between paint that makes it gapped.
 _SLICE_M = 0.001
 _GAP_M = 0.004
+#: Share of the paint left beyond each end of its extent along a curve when checking that the
+#: curve does not run past it (stray specks).
+_EXTENT_QUANTILE = 0.002
 #: Share of the largest end bounds of gapped paint left out.
 _ENVELOPE_SHARE = 0.05
 
@@ -696,31 +704,51 @@ class PaintCheck:
 def past_paint(polyline: FloatArray, paint: FloatArray, *, tolerance_m: float) -> PaintCheck:
     """Where an ordered polyline (K, 3) runs past the paint (N, 3) at its ends.
 
-    The stroke-end model ends a line inside its paint (at a round cap's centre, a square
-    end's edge or on the last wire of gapped paint), so no end point of a good curve is farther
-    than a stitching voxel or two from a paint point. Walking in from each end, everything
-    before the first point within ``tolerance_m`` of the paint ran past it (an extrapolated
-    spline, a skeleton spur into nothing); the crossing is interpolated between the samples.
-    Interior stretches farther from the paint (a wire mesh's gaps) are the fit's business and
-    only count in the reverse distance.
+    The stroke-end model ends a line within its paint's extent along it (at a round cap's
+    centre, a square end's edge, within the cap of gapped paint). Walking in from each end,
+    everything beyond that extent (its 0.2 % and 99.8 % positions along the curve extended
+    straight past its ends: a few stray specks do not stretch it) and farther than
+    ``tolerance_m`` from the paint ran past it (an extrapolated spline, a skeleton spur into
+    nothing); the crossing is interpolated between the samples. Stretches within the extent
+    farther from the paint (a wire mesh's gaps, also the one before a mesh's last wire, where
+    the curve follows the stroke's centre between the wires) are the fit's business and only
+    count in the reverse distance.
     """
     pts = np.asarray(polyline, dtype=np.float64)
+    paint = np.asarray(paint, dtype=np.float64).reshape(-1, 3)
     dense = resample_polyline(pts, 0.001) if polyline_length(pts) > 0 else pts
     s = cumulative_length(dense)
-    distance, _ = cKDTree(np.asarray(paint, dtype=np.float64)).query(dense)
-    ok = np.flatnonzero(distance <= tolerance_m)
     length = float(s[-1])
+    distance, _ = cKDTree(paint).query(dense)
+    lo, hi = 0.0, length
+    if len(dense) >= 2 and length > 0.0:
+        _, along = extended_positions(dense, paint, reach=_REACH)
+        lo, hi = extent_of(along, quantile=_EXTENT_QUANTILE, length=length)
+    ok = np.flatnonzero((distance <= tolerance_m) | ((s >= lo) & (s <= hi)))
     if ok.size == 0:  # nowhere near its paint: nothing to measure against, keep it whole
         return PaintCheck(
             0.0, length, (0.0, 0.0), float(distance.mean()), float(distance.max()), tolerance_m
         )
     first, last = int(ok[0]), int(ok[-1])
-    start = _crossing(s, distance, first, first - 1, tolerance_m) if first > 0 else 0.0
-    end = _crossing(s, distance, last, last + 1, tolerance_m) if last < len(s) - 1 else length
+    start = _leaves(s, distance, first, first - 1, tolerance_m, lo) if first > 0 else 0.0
+    end = _leaves(s, distance, last, last + 1, tolerance_m, hi) if last < len(s) - 1 else length
     kept = distance[first : last + 1]
     return PaintCheck(
         start, end, (start, length - end), float(kept.mean()), float(kept.max()), tolerance_m
     )
+
+
+def _leaves(
+    s: FloatArray, d: FloatArray, inside: int, outside: int, level: float, extent: float
+) -> float:
+    """Where the curve leaves its paint between the kept sample ``inside`` and the sample
+    ``outside`` past it: the farther out of the crossing of the distance ``level`` (when the
+    kept sample is that near the paint) and the paint extent's end at arc length ``extent``."""
+    out = extent
+    if d[inside] <= level:
+        crossing = _crossing(s, d, inside, outside, level)
+        out = min(crossing, extent) if outside < inside else max(crossing, extent)
+    return float(np.clip(out, min(s[inside], s[outside]), max(s[inside], s[outside])))
 
 
 def _crossing(s: FloatArray, d: FloatArray, inside: int, outside: int, level: float) -> float:

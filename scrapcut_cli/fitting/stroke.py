@@ -101,6 +101,9 @@ MAX_OFF_SURFACE = 0.5
 EDGE_CORRELATION_M = 0.004
 #: Provisional line, then the line through the centres found.
 ITERATIONS = 2
+#: Neighbouring stations' normals further apart than this (degrees) end a run of continuous
+#: frames (a surface does not turn that much within ``STATION_M``).
+FRAME_JUMP_DEG = 60.0
 
 #: What a section saw: both edges, one, none (its centre is unknown).
 BOTH, ONE, NONE = 2, 1, 0
@@ -689,14 +692,26 @@ def _place(
 
 
 def _outward(model: StrokeModel, paint: FloatArray, viewpoints: ArrayLike) -> StrokeModel:
-    """``model`` with each station's normal (and lateral, keeping the frame right-handed)
-    turned to face the camera that saw the paint nearest to it: out of the surface."""
+    """``model`` with its normals (and laterals, keeping the frames right-handed) turned out of
+    the surface: each run of continuous frames to the side from which most of its stations'
+    nearest paint was seen.
+
+    :func:`_frames` carries the frames' signs along the line, so within a run (no step between
+    neighbouring stations' normals over ``FRAME_JUMP_DEG``: where the surface around the line
+    gives no clear lateral direction the frame can jump) one sign serves every station.
+    Turning each station by its own camera would flip single stations where a see-through
+    piece (a basket's side wall, seen through its top) or a grazing view showed the paint from
+    behind, and the shifts :meth:`StrokeModel.recentre` carries between neighbouring stations
+    would then point every which way."""
     cameras = np.asarray(viewpoints, dtype=np.float64).reshape(-1, 3)
-    if len(cameras) != len(paint) or len(paint) == 0:
+    if len(cameras) != len(paint) or len(paint) == 0 or len(model.stations) == 0:
         return model
     _, nearest = cKDTree(paint).query(model.stations)
-    facing = np.einsum("ij,ij->i", cameras[nearest] - model.stations, model.normals)
-    sign = np.where(facing < 0.0, -1.0, 1.0)[:, None]
+    facing = np.sign(np.einsum("ij,ij->i", cameras[nearest] - model.stations, model.normals))
+    step = np.einsum("ij,ij->i", model.normals[:-1], model.normals[1:])
+    run = np.concatenate([[0], np.cumsum(step < np.cos(np.radians(FRAME_JUMP_DEG)))])
+    votes = np.bincount(run, weights=facing)
+    sign = np.where(votes[run] < 0.0, -1.0, 1.0)[:, None]
     return replace(model, lateral=model.lateral * sign, normals=model.normals * sign)
 
 

@@ -375,7 +375,8 @@ def fit_stitched(
     observations = stroke_observations(stitch, config, chosen)
     model = stroke_model(paint, observations) if len(observations.edges) else None
     curve = fit_line(paint, stitch.surface_points, method, config, stroke=model)
-    # No cut past the paint: an end may lie two stitching voxels from its nearest paint point.
+    # No cut past the paint: what lies beyond the paint's extent along the curve and farther
+    # than two stitching voxels from it is cut back.
     curve = trim_to_paint(curve, paint, tolerance_m=2.0 * config.stitch.voxel_size_m)
     if not curve.closed:
         curve = with_confidence(curve, paint, observations, model)
