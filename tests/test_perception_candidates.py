@@ -232,3 +232,24 @@ def test_a_followed_blob_is_not_traded_for_a_stroke_the_scan_never_saw() -> None
     message = str(info.value)
     assert "the scan follows paint that is not shaped like a stroke" in message
     assert "selection.max_width_m" in message and "\n" not in message
+
+
+def test_a_cut_out_drawn_round_on_a_plate_is_a_line() -> None:
+    # A closed circle 150 mm across (a cut-out drawn on a plate), a 25 mm stroke, and a crate
+    # beside it. Its geodesic diameter runs only half way round, and the other half lies up to
+    # 150 mm from it: measured along its loop it is a 470 mm stroke 25 mm wide, the line.
+    theta = np.linspace(0.0, 2.0 * np.pi, 1200)
+    circle = np.column_stack([0.075 * np.cos(theta), 0.075 * np.sin(theta), np.zeros_like(theta)])
+    normals = np.tile([0.0, 0.0, 1.0], (len(circle), 1))
+    ring = voxelise(painted_stroke(circle, normals, noise_m=0.0005, seed=4))
+    crate = patch((0.0, 0.26, 0.15), (0.10, 0.06), 5)
+    points, rgb, parts = assemble(
+        {"ring": ring, "crate": crate}, {"ring": PAINT, "crate": (0.95, 0.38, 0.02)}, 4
+    )
+    selection = select_line(points, rgb, circle[::50], voxel_m=VOXEL)
+    assert selection.line.kind == KIND_LINE
+    assert np.isin(parts["ring"], selection.line.points).mean() > 0.95
+    row = selection.to_dict()["lines"][0]
+    assert 440.0 < row["length_mm"] < 500.0
+    assert 20.0 < row["width_mm"] < 32.0
+    assert any(c.kind == KIND_BLOB for c in selection.rejected)

@@ -19,9 +19,13 @@ into candidates and keeps the line:
    beside the piece is not.
 3. **Shape.** Each candidate's length is the geodesic diameter of its cell graph; its width
    twice the 90 % quantile of its points' distance to that path, and how much the width
-   varies along it (per window of two widths). A stroke is at least ``min_elongation`` times
-   as long as wide and at most ``max_width_m`` wide; boxes, cones, gloves and rusty areas are
-   not.
+   varies along it (per window of two widths). A closed line (a cut-out drawn round on a
+   plate, a ring round a pipe seen all round) is measured along its loop instead: its
+   diameter runs half way round and the other half lies far from it. Whether the paint closes
+   on itself is decided as ``fit --closure`` decides it (``fitting.ordering.paint_chain``),
+   only for candidates too wide for their diameter. A stroke is at least ``min_elongation``
+   times as long as wide and at most ``max_width_m`` wide; boxes, cones, gloves and rusty
+   areas are not.
 4. **The scan.** Each frame looked along its optical axis, from the camera to the surface it
    met (its view centre; through a wire mesh that is the floor behind, so the whole sight line
    counts, not its end); a candidate's ``follow`` is the share of these sight lines passing
@@ -58,6 +62,7 @@ from scipy.spatial import cKDTree
 
 from scrapcut_cli.config import SelectionConfig, validate_section
 from scrapcut_cli.errors import ConfigError, PerceptionError
+from scrapcut_cli.fitting.ordering import paint_chain
 from scrapcut_cli.geometry import (
     cumulative_length,
     pack_voxel_keys,
@@ -343,10 +348,12 @@ def _describe(
     p = pts[idx]
     path, length = _diameter_path(p, config.cell_m, config.link_m)
     if len(path) >= 2:
-        # The nearest point of the path resampled every millimetre: within 0.5 mm of the exact
-        # distance, at a fraction of an exact segment search's cost on tens of thousands.
-        offsets, _ = cKDTree(resample_polyline(path, 0.001)).query(p)
-        width = 2.0 * float(np.quantile(offsets, 0.9))
+        offsets, width = _offsets(path, p)
+        if length < config.min_elongation * width:
+            loop = _loop_path(p, config.cell_m)
+            if loop is not None:
+                path, length = loop
+                offsets, width = _offsets(path, p)
         variation = _width_variation(path, p, offsets, width)
     else:
         width = float(np.ptp(p, axis=0).max()) if len(p) > 1 else voxel_m
@@ -425,6 +432,25 @@ def _diameter_path(points: FloatArray, cell_m: float, link_m: float) -> tuple[Fl
     while order[-1] != a:
         order.append(int(previous[order[-1]]))
     return centroids[order[::-1]], float(dist[b])
+
+
+def _offsets(path: FloatArray, p: FloatArray) -> tuple[FloatArray, float]:
+    """Each point's distance (N,) to the path (K, 3) and the width they make (twice their 90 %
+    quantile), metres. The nearest point of the path resampled every millimetre: within 0.5 mm
+    of the exact distance, at a fraction of an exact segment search's cost on tens of
+    thousands."""
+    offsets, _ = cKDTree(resample_polyline(path, 0.001)).query(p)
+    return offsets, 2.0 * float(np.quantile(offsets, 0.9))
+
+
+def _loop_path(points: FloatArray, cell_m: float) -> tuple[FloatArray, float] | None:
+    """The closed chain (K + 1, 3; its first point repeated last) round a candidate whose paint
+    closes on itself, and its length, metres; None for paint that does not (a line, a blob)."""
+    chain = paint_chain(points, voxel_m=cell_m)
+    if not chain.loop or len(chain.points) < 3:
+        return None
+    loop = np.vstack([chain.points, chain.points[:1]])
+    return loop, float(cumulative_length(loop)[-1])
 
 
 def _width_variation(path: FloatArray, p: FloatArray, offsets: FloatArray, width: float) -> float:
