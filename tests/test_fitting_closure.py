@@ -9,7 +9,7 @@ from helpers import painted_stroke, surface_patch
 from scrapcut_cli.config import ClosureConfig, ScrapcutConfig
 from scrapcut_cli.errors import FittingError
 from scrapcut_cli.fitting import detect_closure, fit_line, nurbs_to_geomdl
-from scrapcut_cli.fitting.closure import arc_mask, hermite_bridge
+from scrapcut_cli.fitting.closure import arc_mask, bridge_directions, hermite_bridge
 from scrapcut_cli.fitting.ordering import paint_chain
 from scrapcut_cli.geometry import PolylineDistance, closed_polyline, false_runs
 
@@ -136,6 +136,33 @@ def test_hermite_bridge_of_a_circle_gap_follows_the_circle() -> None:
     bridge = hermite_bridge(start, out_start, end, out_end)
     assert np.allclose(bridge[0], start) and np.allclose(bridge[-1], end)
     assert mean_distance_to_circle(bridge) < 0.002
+
+
+def test_bridge_over_a_ring_gap_is_not_swung_by_one_hooked_end() -> None:
+    # The centre of a ring's 270 degrees (a 25 mm band: 12 mm half width) whose last 25 mm,
+    # about one stroke width, rise 5 mm out of the ring's plane (a hooked end, as paint misread
+    # at a grazing view). The bridge must start at that tip; beyond the tip's own offset fading
+    # across the gap it should stay within 2 mm of the circle. Directions read off the last
+    # 3 cm (paint_end's) follow the hook: about 4 mm of swing.
+    half, hook = 0.012, 0.005
+    phi = np.radians(np.arange(0.0, 270.0 + 1e-9, 0.25))
+    centre = np.column_stack([RADIUS * np.cos(phi), RADIUS * np.sin(phi), np.zeros_like(phi)])
+    s = RADIUS * phi
+    centre[:, 2] += hook * np.clip((s - (s[-1] - 0.025)) / 0.025, 0.0, None) ** 2
+
+    def swing(bridge: np.ndarray) -> float:
+        off = np.hypot(np.hypot(bridge[:, 0], bridge[:, 1]) - RADIUS, bridge[:, 2])
+        u = np.linspace(0.0, 1.0, len(bridge))  # evenly resampled from the hooked tip
+        return float(np.max(off - hook * (1.0 - u)))
+
+    end_out, start_out = bridge_directions(centre, half_width_m=half)
+    bridge = hermite_bridge(centre[-1], end_out, centre[0], start_out)
+    assert np.allclose(bridge[0], centre[-1]) and np.allclose(bridge[-1], centre[0])
+    assert swing(bridge) < 0.002
+    # Unhooked, the bridge follows the circle.
+    flat = centre * np.array([1.0, 1.0, 0.0])
+    flat_end, flat_start = bridge_directions(flat, half_width_m=half)
+    assert mean_distance_to_circle(hermite_bridge(flat[-1], flat_end, flat[0], flat_start)) < 0.001
 
 
 def test_false_runs_wrap_round_a_loop() -> None:

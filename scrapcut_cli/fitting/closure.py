@@ -69,6 +69,9 @@ LOOP, UNOBSERVED_GAP, FORCED_CLOSED = "loop", "unobserved_gap", "forced_closed"
 FORCED_OPEN = "forced_open"
 #: Chord over which an end's outward direction is measured (or a quarter of a short chain).
 END_SPAN_M = 0.03
+#: Stretch, in stroke widths (two half widths each), over which a bridge's end directions are
+#: measured when a closed fit joins its centre across the gap (:func:`bridge_directions`).
+BRIDGE_SPAN_WIDTHS = 3.0
 #: Spacing of the probes along a bridge, and the distance within which an observed surface
 #: point counts as bare metal at a probe (one and a half 4 mm surface voxels).
 PROBE_STEP_M = 0.002
@@ -378,6 +381,31 @@ def paint_end(
         return np.asarray(end), np.asarray(d)
     t_tip = float(np.percentile((near - end) @ d, 99.0))
     return np.asarray(end + t_tip * d), np.asarray(d)
+
+
+def bridge_directions(polyline: ArrayLike, *, half_width_m: float) -> tuple[FloatArray, FloatArray]:
+    """The unit directions (3,) out of an open centre ``polyline`` (K, 3) at its last and at
+    its first point, for the bridge (:func:`hermite_bridge`) that closes it into a loop.
+    Metres, the points' frame.
+
+    :func:`paint_end`'s quadratic, fitted over ``BRIDGE_SPAN_WIDTHS`` stroke widths
+    (``2 * half_width_m`` each) short of the last half width instead of ``END_SPAN_M``, and
+    at most a quarter of the line, as there. A bridge carries an end's direction across the
+    whole gap, so an error of angle a there swings it by about a x gap / 4 (a ring's 12 cm
+    gap: 5 mm for 10 degrees), and the last stroke width or two of a band are where it is
+    least sure: slices of its square end, paint misread at the grazing view under a pipe,
+    a centre pulled off line by either. Over a few centimetres such a hook is most of the
+    span and the quadratic follows it; over three stroke widths it is a third of it at most,
+    and the quadratic's curvature still follows a ring's bend (on a 160 mm ring and a 25 mm
+    band the span is a sixth of the circumference, which a quadratic fits to a fraction of a
+    millimetre). Much longer spans stop following the line's own turns out of its plane (a
+    ring drawn by hand wanders along the pipe).
+    """
+    pts = np.asarray(polyline, dtype=np.float64).reshape(-1, 3)
+    span = BRIDGE_SPAN_WIDTHS * 2.0 * float(half_width_m)
+    _, out_last = paint_end(pts, None, half_width_m=half_width_m, span_m=span)
+    _, out_first = paint_end(pts[::-1], None, half_width_m=half_width_m, span_m=span)
+    return out_last, out_first
 
 
 class _Probes:

@@ -59,7 +59,12 @@ from scrapcut_cli.fitting._common import (
     follows_input_order,
     moving_average,
 )
-from scrapcut_cli.fitting.closure import Closure, hermite_bridge, paint_end
+from scrapcut_cli.fitting.closure import (
+    Closure,
+    bridge_directions,
+    hermite_bridge,
+    paint_end,
+)
 from scrapcut_cli.fitting.curve import Curve
 from scrapcut_cli.fitting.ends import check_end_trim, stroke_ends
 from scrapcut_cli.fitting.ordering import tree_diameter
@@ -736,7 +741,9 @@ def _closed_centre(
     """The centre of a closed line's paint, as a loop's vertices (K, 3), canonical frame, and
     where the loop came from: ``cycle`` (the skeleton's own cycle round paint seen all round)
     or ``path+bridge`` (its longest path, centred as an open line's, closed across the gap by
-    the cubic that continues both ends). Oriented and started as the closure's chain."""
+    the cubic that continues both ends, their directions read over a few stroke widths:
+    :func:`~scrapcut_cli.fitting.closure.bridge_directions`). Oriented and started as the
+    closure's chain."""
     leaf = float(config.leaf_size_m)
     chain = frame.to_local(closure.chain)
     loop_length = float(cumulative_length(closed_polyline(frame.to_local(closure.loop)))[-1])
@@ -783,6 +790,9 @@ def _closed_centre(
     last = float(s[-1]) + float(np.dot(end_tip - centre[-1], end_out))
     keep = (s > first + 1e-6) & (s < last - 1e-6)
     centre = np.vstack([start_tip, centre[keep], end_tip])
+    # The bridge leaves and reaches the tips along directions read off a longer stretch than
+    # the tips' own (one hooked end must not swing it across the whole gap).
+    end_out, start_out = bridge_directions(centre, half_width_m=band)
     bridge = hermite_bridge(end_tip, end_out, start_tip, start_out, spacing=_STATION_M)
     return np.vstack([centre, bridge[1:-1]]), "path+bridge"
 
