@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import io
 import struct
+from typing import Any
 
 import numpy as np
 import pytest
 from PIL import Image
+from scipy.spatial.transform import Rotation
 
 from scrapcut_cli.errors import RecordingError
 from scrapcut_cli.recording import messages as m
@@ -241,3 +243,82 @@ def test_damaged_bytes_are_a_recording_error() -> None:
         m.raw_header(raw[:10], cdr=True)
     with pytest.raises(RecordingError, match="damaged sensor_msgs/msg/Image message"):
         m.raw_image_size(raw[:26], m.IMAGE, cdr=True)
+
+
+def _tf_sample() -> object:
+    rng = np.random.default_rng(7)
+    transforms = []
+    for k, (parent, child) in enumerate(
+        [("/world", "base"), ("base", "link_1"), ("link_1", "caméra_optical"), ("a", "")]
+    ):
+        T = np.eye(4)
+        T[:3, :3] = Rotation.random(random_state=k).as_matrix()
+        T[:3, 3] = rng.normal(size=3)
+        transforms.append((parent, child, T))
+    return m.tf_msg(1_700_000_000_123_456_789, transforms)
+
+
+@pytest.mark.parametrize("encoding", ["cdr_le", "cdr_be", "ros1"])
+def test_raw_tf_transforms_match_the_deserialised_message(encoding: str) -> None:
+    store = m.typestore()
+    msg = _tf_sample()
+    if encoding == "ros1":
+        raw, decoded = _ros1_tf(msg)
+    else:
+        raw = bytes(store.serialize_cdr(msg, m.TF_MESSAGE, little_endian=encoding == "cdr_le"))
+        decoded = store.deserialize_cdr(raw, m.TF_MESSAGE)
+    fast = m.raw_tf_transforms(raw, cdr=encoding != "ros1")
+    assert fast == m.tf_transforms(decoded)
+    assert fast is not None and len(fast) == 4
+    assert all(type(x) is float for item in fast for x in (*item[3], *item[4]))
+    empty = m.tf_msg(5, [])
+    raw_empty = _ros1_tf(empty)[0] if encoding == "ros1" else m.serialize(empty, m.TF_MESSAGE)
+    assert m.raw_tf_transforms(raw_empty, cdr=encoding != "ros1") == []
+
+
+def _ros1_tf(msg: Any) -> tuple[bytes, Any]:
+    """A ROS 2 TFMessage as a ROS 1 bag holds it (a header with ``seq``), and rosbags'
+    ROS 1 decoding of those bytes."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", m.TF_MESSAGE))
+    t = store.types
+    items = [
+        t["geometry_msgs/msg/TransformStamped"](
+            header=t["std_msgs/msg/Header"](
+                seq=k,
+                stamp=t["builtin_interfaces/msg/Time"](
+                    sec=item.header.stamp.sec, nanosec=item.header.stamp.nanosec
+                ),
+                frame_id=item.header.frame_id,
+            ),
+            child_frame_id=item.child_frame_id,
+            transform=item.transform,
+        )
+        for k, item in enumerate(msg.transforms)
+    ]
+    raw = bytes(store.serialize_ros1(t[m.TF_MESSAGE](transforms=items), m.TF_MESSAGE))
+    return raw, store.deserialize_ros1(raw, m.TF_MESSAGE)
+
+
+def test_raw_tf_transforms_leave_anything_else_to_rosbags() -> None:
+    raw = m.serialize(_tf_sample(), m.TF_MESSAGE)
+    assert m.raw_tf_transforms(raw, cdr=True) is not None
+    damaged = [
+        raw[:-60],  # cut short
+        raw + bytes(8),  # trailing bytes beyond the alignment
+        b"\x02" + raw[1:],  # unknown encapsulation
+        raw[:4] + struct.pack("<I", 10**6) + raw[8:],  # more transforms than bytes
+        raw[:16] + b"\xff" + raw[17:],  # the first frame id's length
+        raw[:20] + b"\xff" + raw[21:],  # the first frame id no longer UTF-8
+        b"",
+    ]
+    # the terminator of the first frame id (its length, at offset 16, counts it)
+    (length,) = struct.unpack_from("<I", raw, 16)
+    damaged.append(raw[: 20 + length - 1] + b"x" + raw[20 + length :])
+    for bad in damaged:
+        assert m.raw_tf_transforms(bad, cdr=True) is None
+    ros1 = _ros1_tf(_tf_sample())[0]
+    for bad in (ros1[:-1], ros1 + b"\x00", ros1[:4]):
+        assert m.raw_tf_transforms(bad, cdr=False) is None

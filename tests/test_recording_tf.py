@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from helpers import (
@@ -170,3 +172,49 @@ def test_empty_query() -> None:
     T, valid = buffer.lookup("panda_link0", "camera_color_optical_frame", [])
     assert T.shape == (0, 4, 4)
     assert valid.shape == (0,)
+
+
+def test_add_transforms_lean_path_matches_add_and_its_errors() -> None:
+    rng = np.random.default_rng(3)
+    items = []
+    for k in range(200):
+        q = tuple(float(x) for x in rng.normal(size=4) * 3.0)
+        t = tuple(float(x) for x in rng.normal(size=3))
+        items.append(("base", "tool" if k % 3 else "cam", 1000 + k, t, q))
+    one, many = TfBuffer(), TfBuffer()
+    for parent, child, stamp, t, q in items:
+        one.add(parent, child, stamp, t, q, static=False)
+    many.add_transforms(items, static=False)
+    for child in ("tool", "cam"):
+        a, b = one._edges[child], many._edges[child]
+        assert (a.parent, a.static, a.stamps, a.translations) == (
+            b.parent,
+            b.static,
+            b.stamps,
+            b.translations,
+        )
+        assert a.quats == b.quats  # bit for bit: the same norm and divisions
+    static = TfBuffer()
+    static.add_transforms([("base", "s", 1, (0.0, 0.0, 1.0), (0.0, 0.0, 0.0, 2.0))], static=True)
+    static.add_transforms([("base", "s", 9, (1.0, 0.0, 0.0), (0.0, 0.0, 2.0, 0.0))], static=True)
+    edge = static._edges["s"]
+    assert (edge.stamps, edge.translations, edge.quats) == (
+        [9],
+        [(1.0, 0.0, 0.0)],
+        [(0.0, 0.0, 1.0, 0.0)],
+    )
+    bad = [
+        ("base", "tool", 5, (math.nan, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)),
+        ("base", "tool", 5, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0)),
+        ("base", "tool", 5, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1e7)),
+        ("other", "tool", 5, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)),
+        ("tool", "tool", 5, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)),
+    ]
+    for item in bad:
+        with pytest.raises(RecordingError) as lean:
+            many.add_transforms([item], static=False)
+        with pytest.raises(RecordingError) as plain:
+            one.add(*item, static=False)
+        assert str(lean.value) == str(plain.value)
+    with pytest.raises(RecordingError, match="on both /tf and /tf_static"):
+        many.add_transforms([("base", "tool", 5, (0.0,) * 3, (0.0, 0.0, 0.0, 1.0))], static=True)

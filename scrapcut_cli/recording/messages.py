@@ -690,6 +690,93 @@ def tf_transforms(
     return out
 
 
+_TF_LE = (struct.Struct("<I"), struct.Struct("<iI"), struct.Struct("<7d"))
+_TF_BE = (struct.Struct(">I"), struct.Struct(">iI"), struct.Struct(">7d"))
+_TF_ROS1_HEAD = struct.Struct("<IiI")  # seq, sec, nanosec
+
+
+TfTransform = tuple[str, str, int, tuple[float, float, float], tuple[float, float, float, float]]
+
+
+def raw_tf_transforms(raw: bytes | memoryview, *, cdr: bool) -> list[TfTransform] | None:
+    """:func:`tf_transforms` of a serialised TFMessage, read straight from its bytes.
+
+    A recording's /tf holds thousands of messages; rosbags builds eight message objects per
+    transform (a quarter of a millisecond a message). None when the bytes are anything but a
+    well-formed TFMessage of the standard layout: the caller then deserialises them, and so
+    gets rosbags' own result or error.
+    """
+    buf = memoryview(raw)
+    n_bytes = len(buf)
+    out = []
+    try:
+        if cdr:
+            if n_bytes < 4 or buf[0] != 0 or buf[2] != 0 or buf[3] != 0 or buf[1] > 1:
+                return None
+            u32, stamp, floats = _TF_LE if buf[1] else _TF_BE
+            data = buf[4:]
+            size = n_bytes - 4
+            (count,) = u32.unpack_from(data, 0)
+            pos = 4
+            for _ in range(count):
+                sec, nanosec = stamp.unpack_from(data, pos)
+                pos += 8
+                names = []
+                for _ in range(2):
+                    pos = (pos + 3) & ~3
+                    (length,) = u32.unpack_from(data, pos)
+                    end = pos + 4 + length
+                    if length < 1 or end > size or data[end - 1] != 0:
+                        return None
+                    names.append(bytes(data[pos + 4 : end - 1]).decode())
+                    pos = end
+                pos = (pos + 7) & ~7
+                v = floats.unpack_from(data, pos)
+                pos += 56
+                out.append(
+                    (
+                        _strip_slash(names[0]),
+                        _strip_slash(names[1]),
+                        sec * 1_000_000_000 + nanosec,
+                        v[:3],
+                        v[3:],
+                    )
+                )
+            if pos + 3 < size:  # rosbags' size check: at most the alignment padding after
+                return None
+        else:
+            u32, floats = _TF_LE[0], _TF_LE[2]
+            (count,) = u32.unpack_from(buf, 0)
+            pos = 4
+            for _ in range(count):
+                _, sec, nanosec = _TF_ROS1_HEAD.unpack_from(buf, pos)
+                pos += 12
+                names = []
+                for _ in range(2):
+                    (length,) = u32.unpack_from(buf, pos)
+                    end = pos + 4 + length
+                    if end > n_bytes:
+                        return None
+                    names.append(bytes(buf[pos + 4 : end]).decode())
+                    pos = end
+                v = floats.unpack_from(buf, pos)
+                pos += 56
+                out.append(
+                    (
+                        _strip_slash(names[0]),
+                        _strip_slash(names[1]),
+                        sec * 1_000_000_000 + nanosec,
+                        v[:3],
+                        v[3:],
+                    )
+                )
+            if pos != n_bytes:
+                return None
+    except (struct.error, UnicodeDecodeError, IndexError):
+        return None
+    return out
+
+
 def _strip_slash(frame_id: str) -> str:
     """tf2 ignores a leading slash (ROS 1 tf used ``/base_link``)."""
     return frame_id[1:] if frame_id.startswith("/") else frame_id

@@ -217,6 +217,7 @@ class Recording:
         except Exception as exc:  # whatever rosbags raises on a file that passed the checks
             self._drop_scratch()
             raise RecordingError(self._open_error(exc)) from None
+        _map_sqlite_storage(self._reader)
         self._connections: dict[str, list[Any]] = {}
         for conn in self._reader.connections:
             self._connections.setdefault(conn.topic, []).append(conn)
@@ -632,8 +633,10 @@ class Recording:
         for topic, msgtype, _, raw in self.raw_messages(topics):
             if topic in tf_topics:
                 if msgtype in m.TF_TYPES:
-                    msg = self.deserialize(raw, msgtype)
-                    tf.add_transforms(m.tf_transforms(msg), static=tf_topics[topic])
+                    transforms = m.raw_tf_transforms(raw, cdr=self._cdr)
+                    if transforms is None:  # not the standard layout: rosbags decides
+                        transforms = m.tf_transforms(self.deserialize(raw, msgtype))
+                    tf.add_transforms(transforms, static=tf_topics[topic])
                 continue
             headers = image_headers[topic]
             stamp, frame_id, _ = m.raw_header(raw, cdr=self._cdr)
@@ -975,6 +978,32 @@ class Recording:
                 raise RecordingError(f"{EXPLORATION_TOPIC} messages must be JSON objects")
             steps.append(step)
         return steps
+
+
+#: How much of a ROS 2 bag's sqlite3 file its connection may memory-map (SQLite caps it at
+#: its compile-time limit, 2 GiB by default; beyond the mapped part it reads as before).
+SQLITE_MMAP_BYTES = 1 << 30
+
+
+def _map_sqlite_storage(reader: Any) -> None:
+    """Let SQLite read a ROS 2 bag's sqlite3 files through a memory map.
+
+    An image is a BLOB of several hundred 4 KiB overflow pages; read page by page (a system
+    call each) two passes over a 1280x720 recording's images cost ~0.7 ms an image, mapped
+    ~0.4 ms. rosbags opens the files read-only and immutable, which is what mapping needs; the
+    bytes read are the same. Storage other than sqlite3, or a rosbags without these
+    attributes, is left alone.
+    """
+    for bag in getattr(reader, "readers", ()):
+        for storage in getattr(getattr(bag, "storage", None), "storages", ()):
+            connection = getattr(storage, "dbconn", None)
+            if connection is None or not hasattr(connection, "execute"):
+                continue
+            try:
+                for _ in connection.execute(f"PRAGMA mmap_size={SQLITE_MMAP_BYTES}"):
+                    pass
+            except Exception:  # an optimisation only: read as before
+                continue
 
 
 def _has_mcap_footer(path: Path) -> bool:

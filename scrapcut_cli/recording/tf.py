@@ -12,6 +12,7 @@ tf2 does this inside ROS; outside ROS there is no maintained Python equivalent (
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -115,9 +116,55 @@ class TfBuffer:
         *,
         static: bool,
     ) -> None:
-        """:meth:`add` for every (parent, child, stamp_ns, translation, quat_xyzw)."""
+        """:meth:`add` for every (parent, child, stamp_ns, translation, quat_xyzw).
+
+        A recording's /tf holds tens of thousands of transforms: those of tuples of floats
+        onto a known edge take a lean path with the same arithmetic (numpy's dot for the
+        norm); everything else, and every error, goes through :meth:`add`.
+        """
+        edges = self._edges
+        bound = MAX_COORDINATE_M
         for parent, child, stamp, t, q in transforms:
-            self.add(parent, child, stamp, t, q, static=static)
+            edge = edges.get(child)
+            if (
+                edge is None
+                or edge.parent != parent
+                or edge.static != static
+                or type(t) is not tuple
+                or type(q) is not tuple
+                or len(t) != 3
+                or len(q) != 4
+            ):
+                self.add(parent, child, stamp, t, q, static=static)
+                continue
+            x, y, z = map(float, t)
+            qx, qy, qz, qw = qf = tuple(map(float, q))
+            if not (
+                -bound <= x <= bound
+                and -bound <= y <= bound
+                and -bound <= z <= bound
+                and -1e6 <= qx <= 1e6
+                and -1e6 <= qy <= 1e6
+                and -1e6 <= qz <= 1e6
+                and -1e6 <= qw <= 1e6
+            ):
+                self.add(parent, child, stamp, t, q, static=static)  # raises
+                continue
+            qa = np.array(qf)
+            norm = math.sqrt(qa.dot(qa))  # as add's np.sqrt(np.dot(q, q)): the same bits
+            if norm < 1e-9 or parent == child:
+                self.add(parent, child, stamp, t, q, static=static)  # raises
+                continue
+            unit = (qx / norm, qy / norm, qz / norm, qw / norm)
+            if static:
+                edge.stamps[:] = [int(stamp)]
+                edge.translations[:] = [(x, y, z)]
+                edge.quats[:] = [unit]
+            else:
+                edge.stamps.append(int(stamp))
+                edge.translations.append((x, y, z))
+                edge.quats.append(unit)
+            edge.t = None
 
     # ------------------------------------------------------------------ structure
 
