@@ -733,15 +733,7 @@ def raw_tf_transforms(raw: bytes | memoryview, *, cdr: bool) -> list[TfTransform
                 pos = (pos + 7) & ~7
                 v = floats.unpack_from(data, pos)
                 pos += 56
-                out.append(
-                    (
-                        _strip_slash(names[0]),
-                        _strip_slash(names[1]),
-                        sec * 1_000_000_000 + nanosec,
-                        v[:3],
-                        v[3:],
-                    )
-                )
+                out.append(_tf_entry(names, sec, nanosec, v))
             if pos + 3 < size:  # rosbags' size check: at most the alignment padding after
                 return None
         else:
@@ -761,20 +753,24 @@ def raw_tf_transforms(raw: bytes | memoryview, *, cdr: bool) -> list[TfTransform
                     pos = end
                 v = floats.unpack_from(buf, pos)
                 pos += 56
-                out.append(
-                    (
-                        _strip_slash(names[0]),
-                        _strip_slash(names[1]),
-                        sec * 1_000_000_000 + nanosec,
-                        v[:3],
-                        v[3:],
-                    )
-                )
+                out.append(_tf_entry(names, sec, nanosec, v))
             if pos != n_bytes:
                 return None
     except (struct.error, UnicodeDecodeError, IndexError):
         return None
     return out
+
+
+def _tf_entry(names: list[str], sec: int, nanosec: int, values: tuple[float, ...]) -> TfTransform:
+    """(parent, child, stamp_ns, translation, quaternion xyzw) of a transform read by
+    :func:`raw_tf_transforms`: its two frame names, stamp and seven doubles."""
+    return (
+        _strip_slash(names[0]),
+        _strip_slash(names[1]),
+        sec * 1_000_000_000 + nanosec,
+        (values[0], values[1], values[2]),
+        (values[3], values[4], values[5], values[6]),
+    )
 
 
 def _strip_slash(frame_id: str) -> str:
