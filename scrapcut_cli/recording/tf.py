@@ -73,13 +73,26 @@ class TfBuffer:
         """
         if parent == child:
             raise RecordingError(f"TF transform from frame {child!r} to itself")
-        # Plain floats, not numpy: a recording's /tf holds tens of thousands of transforms.
+        # Plain floats and chained comparisons, not numpy nor all() over generators: a
+        # recording's /tf holds tens of thousands of transforms.
         t = _floats(translation, 3)
         q = _floats(quat_xyzw, 4)
+        x, y, z = t
+        qx, qy, qz, qw = q
+        bound = MAX_COORDINATE_M
         # Bounded before any arithmetic: 1e300 would overflow the norm (NaN fails too).
-        bounded = all(abs(x) <= MAX_COORDINATE_M for x in t) and all(abs(x) <= 1e6 for x in q)
+        bounded = (
+            -bound <= x <= bound
+            and -bound <= y <= bound
+            and -bound <= z <= bound
+            and -1e6 <= qx <= 1e6
+            and -1e6 <= qy <= 1e6
+            and -1e6 <= qz <= 1e6
+            and -1e6 <= qw <= 1e6
+        )
         # numpy's dot, as the poses have always been normalised (the same bytes out).
-        norm = float(np.sqrt(np.dot(q, q))) if bounded else 0.0
+        qa = np.array(q)
+        norm = math.sqrt(qa.dot(qa)) if bounded else 0.0
         if not bounded or norm < 1e-9:
             raise RecordingError(
                 f"TF transform {parent} -> {child} is not a valid pose: {list(t)}, {list(q)}"
@@ -101,11 +114,11 @@ class TfBuffer:
             # Timeless: the latest message from any publisher replaces the transform.
             edge.stamps[:] = [int(stamp_ns)]
             edge.translations[:] = [t]
-            edge.quats[:] = [(q[0] / norm, q[1] / norm, q[2] / norm, q[3] / norm)]
+            edge.quats[:] = [(qx / norm, qy / norm, qz / norm, qw / norm)]
         else:
             edge.stamps.append(int(stamp_ns))
             edge.translations.append(t)
-            edge.quats.append((q[0] / norm, q[1] / norm, q[2] / norm, q[3] / norm))
+            edge.quats.append((qx / norm, qy / norm, qz / norm, qw / norm))
         edge.t = None
 
     def add_transforms(
@@ -116,55 +129,10 @@ class TfBuffer:
         *,
         static: bool,
     ) -> None:
-        """:meth:`add` for every (parent, child, stamp_ns, translation, quat_xyzw).
-
-        A recording's /tf holds tens of thousands of transforms: those of tuples of floats
-        onto a known edge take a lean path with the same arithmetic (numpy's dot for the
-        norm); everything else, and every error, goes through :meth:`add`.
-        """
-        edges = self._edges
-        bound = MAX_COORDINATE_M
+        """:meth:`add` for every (parent, child, stamp_ns, translation, quat_xyzw)."""
+        add = self.add
         for parent, child, stamp, t, q in transforms:
-            edge = edges.get(child)
-            if (
-                edge is None
-                or edge.parent != parent
-                or edge.static != static
-                or type(t) is not tuple
-                or type(q) is not tuple
-                or len(t) != 3
-                or len(q) != 4
-            ):
-                self.add(parent, child, stamp, t, q, static=static)
-                continue
-            x, y, z = map(float, t)
-            qx, qy, qz, qw = qf = tuple(map(float, q))
-            if not (
-                -bound <= x <= bound
-                and -bound <= y <= bound
-                and -bound <= z <= bound
-                and -1e6 <= qx <= 1e6
-                and -1e6 <= qy <= 1e6
-                and -1e6 <= qz <= 1e6
-                and -1e6 <= qw <= 1e6
-            ):
-                self.add(parent, child, stamp, t, q, static=static)  # raises
-                continue
-            qa = np.array(qf)
-            norm = math.sqrt(qa.dot(qa))  # as add's np.sqrt(np.dot(q, q)): the same bits
-            if norm < 1e-9 or parent == child:
-                self.add(parent, child, stamp, t, q, static=static)  # raises
-                continue
-            unit = (qx / norm, qy / norm, qz / norm, qw / norm)
-            if static:
-                edge.stamps[:] = [int(stamp)]
-                edge.translations[:] = [(x, y, z)]
-                edge.quats[:] = [unit]
-            else:
-                edge.stamps.append(int(stamp))
-                edge.translations.append((x, y, z))
-                edge.quats.append(unit)
-            edge.t = None
+            add(parent, child, stamp, t, q, static=static)
 
     # ------------------------------------------------------------------ structure
 
