@@ -138,6 +138,7 @@ def paint_chain(
     max_nodes: int = 400,
     link_factor: float = 5.0,
     neighbours: int = 8,
+    chain_lines: bool = True,
 ) -> PaintChain:
     """The chain down the middle of a curve-like cloud (N, 3), and whether it is a loop.
 
@@ -151,7 +152,9 @@ def paint_chain(
     and a loop two arcs, each joining the disks. A loop is then cut next to a, between the
     nodes nearer one arc and those nearer the other, and geodesic distances from a run once
     round it. Slices of the geodesic distance, one voxel thick, are averaged into the chain,
-    which is straightened twice by slicing the points across it.
+    which is straightened twice by slicing the points across it. ``chain_lines=False`` asks
+    only whether the cloud is a loop: a line's chain is then not made (``points`` holds its
+    two ends a and b).
     """
     size = float(voxel_m)
     while True:
@@ -191,6 +194,8 @@ def paint_chain(
     b = int(np.argmax(_finite(along)))
     arcs = _loop_arcs(graph, nodes, distances, a, b, typical)
     is_loop = arcs is not None
+    if not is_loop and not chain_lines:
+        return PaintChain(nodes[[a, b]], False, used)
     if arcs is not None:
         along = _once_round(graph, a, arcs)
     if not np.isfinite(along).all() or float(along.max()) <= 0.0:

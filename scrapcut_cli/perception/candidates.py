@@ -446,7 +446,7 @@ def _offsets(path: FloatArray, p: FloatArray) -> tuple[FloatArray, float]:
 def _loop_path(points: FloatArray, cell_m: float) -> tuple[FloatArray, float] | None:
     """The closed chain (K + 1, 3; its first point repeated last) round a candidate whose paint
     closes on itself, and its length, metres; None for paint that does not (a line, a blob)."""
-    chain = paint_chain(points, voxel_m=cell_m)
+    chain = paint_chain(points, voxel_m=cell_m, chain_lines=False)
     if not chain.loop or len(chain.points) < 3:
         return None
     loop = np.vstack([chain.points, chain.points[:1]])
