@@ -243,11 +243,13 @@ def test_a_mesh_stays_one_skeleton_at_5_mm_and_its_sigma_covers_the_error() -> N
     )
     ref = truth[(truth[:, 0] > 0.03) & (truth[:, 0] < 0.27)]
     err = PolylineDistance(curve.points).distance(ref)
-    assert err.mean() < 0.002 and err.max() < 0.006
+    # The band's width taken out where the model knows the centre: 0.6 / 2.8 mm (1.9 / 5.5 mm
+    # centred over the band's width).
+    assert err.mean() < 0.0012 and err.max() < 0.004
     conf = curve.confidence
     assert conf is not None
-    # Thin paint: low support everywhere, σ well above a solid stroke's.
-    assert conf.low_support.mean() > 0.7 and np.median(conf.sigma_m) > 0.002
+    # Thin paint: low support along most of it, σ well above a solid stroke's.
+    assert conf.low_support.mean() > 0.6 and np.median(conf.sigma_m) > 0.002
     near = PolylineDistance(curve.points).query(ref)[2]
     sigma = np.interp(near, np.arange(len(curve.points)), conf.sigma_m)
     assert np.mean(err <= 2.0 * sigma) > 0.9
@@ -289,3 +291,51 @@ def test_normals_stay_on_one_side_where_some_paint_was_seen_from_behind(plate: t
     stretch = (paint[:, 0] > 0.22) & (paint[:, 0] < 0.26)
     offsets = moved[stretch, 1] - true_y(moved[stretch, 0])
     assert abs(float(np.mean(offsets))) < 0.001
+
+
+#: A sharp V groove across a straight stroke: its middle, half width and depth (metres).
+GROOVE = (0.15, 0.010, 0.012)
+
+
+def _grooved(x: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Points (N, 3) on a plate with the V groove across it (along y), at x (N,), y = u (N,)."""
+    at, half, depth = GROOVE
+    z = -depth * np.clip(1.0 - np.abs(x - at) / half, 0.0, None)
+    return np.column_stack([x, u, z])
+
+
+def test_both_fits_follow_a_sharp_groove_across_the_stroke() -> None:
+    # The air chamber's groove: a 25 mm stroke dips through a V 12 mm deep and 20 mm wide.
+    # Centred over the band's width (a centre line resolved no finer than the stroke is
+    # wide) both fits cut across the V's root, 6-8 mm above it; with the band's width taken
+    # out where the stroke model knows the centre, they follow it (NURBS 0.3 mm at the root,
+    # 6.5 before; the 5 mm skeleton 3.8, 6.1 before).
+    rng = np.random.default_rng(3)
+    xs = np.concatenate([np.arange(0.0, 0.3, 0.0015), np.arange(0.14, 0.16, 0.0005)])
+    us = np.arange(-HALF, HALF + 1e-9, 0.0015)
+    gx, gu = np.meshgrid(xs, us, indexing="ij")
+    paint = _grooved(gx.ravel(), gu.ravel())
+    paint = paint[np.argsort(paint[:, 0], kind="stable")]
+    xe = np.sort(np.concatenate([np.arange(0.0, 0.3, 0.001), np.arange(0.14, 0.16, 0.0003)]))
+    edges = np.vstack([_grooved(xe, np.full_like(xe, HALF)), _grooved(xe, -np.full_like(xe, HALF))])
+    sx, su = np.meshgrid(
+        xs,
+        np.concatenate(
+            [np.arange(-HALF - 0.004, -HALF, 0.002), np.arange(HALF, HALF + 0.004, 0.002)]
+        ),
+        indexing="ij",
+    )
+    surface = _grooved(sx.ravel(), su.ravel())
+    paint = paint + rng.normal(scale=NOISE, size=paint.shape)
+    edges = edges + rng.normal(scale=NOISE, size=edges.shape)
+    observations = StrokeObservations(edges=edges, surface=surface, voxel_m=0.002)
+    model = stroke_model(paint, observations)
+    x = np.linspace(0.03, 0.27, 2401)
+    truth = _grooved(x, np.zeros_like(x))
+    nurbs = fit_nurbs(paint, config=NurbsConfig(), stroke=model)
+    skeleton = fit_skeleton(paint, config=SkeletonConfig(leaf_size_m=0.005), stroke=model)
+    for curve, worst in ((nurbs, 0.001), (skeleton, 0.0045)):
+        err = PolylineDistance(curve.points).distance(truth)
+        root = np.abs(x - GROOVE[0]) < 0.001
+        assert err[root].max() < worst, curve.method
+        assert err.mean() < 0.0006, curve.method

@@ -138,7 +138,10 @@ def fit_nurbs(
     stroke : StrokeModel, optional
         The stroke's centre from its edges (:mod:`~scrapcut_cli.fitting.stroke`): the paint
         is moved across the line onto it first (its centre is off the line where a hole took
-        part of the stroke); the unknown stretches are bridged by the curve's smoothness.
+        part of the stroke); the unknown stretches are bridged by the curve's smoothness. The
+        curve is fitted to the band collapsed onto the model's centre where the model knows it
+        (``StrokeModel.collapse``): a line is then resolved along its length finer than the
+        stroke is wide (a groove's V); the ends are still read off the whole band.
 
     Returns
     -------
@@ -169,6 +172,8 @@ def fit_nurbs(
     # its point count (the loop's cost grows with the points; the centre line does not
     # change); residuals, ends and orientation use every point.
     x_all = x
+    if stroke is not None:  # the band's width taken out where the model knows the centre
+        x = frame.to_local(stroke.collapse(pts)[0])[order]
     x, mass = _aggregate(x)
 
     candidates = []
@@ -680,7 +685,8 @@ def _to_data_extent(x: FloatArray, fit: _Fit, config: NurbsConfig) -> tuple[_Fit
     ts = np.linspace(0.0, 1.0, max(int(fit.length / 0.0005), 200))
     dense = spline(ts)
     s = cumulative_length(dense)
-    dist = np.linalg.norm(fit.residuals, axis=1)
+    # The band's own reach: the fit may have been made to its collapsed centre.
+    dist, _ = cKDTree(dense).query(x)
     radius = max(2.0 * float(np.quantile(dist, 0.95)), 0.002)
     ends = stroke_ends(
         dense,

@@ -247,22 +247,32 @@ def fit_skeleton(
     # onto its corner, and at a fine leaf size the skeleton of a holey band wanders across it.
     # Thinning forks at the band's ends (towards its corners): cut a window off each end, then
     # extend straight to the paint.
+    # The band's centre, with the stroke model: its width taken out where the model knows
+    # the centre (``StrokeModel.collapse``), so the centring resolves the line's shape along
+    # it (a groove's dip) at the leaf, not at the band's width; where it does not (a hole, a
+    # wire along the line), the model's line across.
+    centred = paint
+    if stroke is not None:
+        xc, moved = stroke.collapse(pts)
+        keep = (point_piece >= 0) if len(bridge) else inside
+        centred = frame.to_local(xc)[keep & moved]
     window = _window(moving_average(path, 3), paint, config)
+    centring = _window(moving_average(path, 3), centred, config) if len(centred) else window
     stations = resample_polyline(path, _STATION_M)
     centre = moving_average(stations, 2 * round(window / _STATION_M) + 1)
     reach = max(3.0 * leaf, 2.0 * window)
     centre = _extend_to_data(_trim(centre, window), paint, config, span=window)
     # Across a gap the model's line is all there is to centre on.
     if len(bridge):
-        gap = ~np.isfinite(cKDTree(paint).query(bridge, distance_upper_bound=0.5 * leaf)[0])
-        targets = np.vstack([paint, bridge[gap]])
+        gap = ~np.isfinite(cKDTree(centred).query(bridge, distance_upper_bound=0.5 * leaf)[0])
+        targets = np.vstack([centred, bridge[gap]])
     else:
-        targets = paint
+        targets = centred
     for _ in range(int(config.refine_iterations)):
         centre = _centre_on_paint(
             centre,
             targets,
-            window=window,
+            window=centring,
             radius=config.refine_radius_m,
             corner_reach=reach,
             corner_angle=float(np.radians(config.corner_angle_deg)),

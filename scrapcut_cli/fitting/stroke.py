@@ -47,6 +47,12 @@ The recipe (:func:`stroke_model`):
    (``recentre``) and the centres are moved along its normal onto it. Solid strokes (steps,
    flanges, grooves) and one-sided rises are left alone.
 
+The fitters fit the paint moved onto the centre (:meth:`StrokeModel.recentre`), and, where
+the model knows the centre, with the band's width taken out (:meth:`StrokeModel.collapse`): a
+fit to the whole band cannot follow the line along its length any finer than the band is wide
+(it would rather zig-zag across it), so a sharp groove's V would be cut across 6-8 mm above its
+root; collapsed, the band is as thin as its noise and the V is followed.
+
 Each section also gets its lateral uncertainty σ (metres): the spread of its edges' offsets
 over the square root of how many independent pieces of edge the window held, the width's
 variation along the line when one edge stands in for two, and a resolution floor of the
@@ -260,6 +266,24 @@ class StrokeModel:
         shifts = moving_average(shifts, window) * taper[:, None]
         moved = cloud + shifts[k, 0, None] * self.lateral[k] + shifts[k, 1, None] * self.normals[k]
         return self.onto_envelope(moved, k)
+
+    def collapse(self, points: ArrayLike) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """``points`` (N, 3) (recentred paint) moved across the line onto the stroke's centre
+        wherever their nearest station's centre is known: the band's width taken out, its
+        shape along the line and its height kept. Points off the line's ends, farther than
+        ``MAX_ACROSS`` half widths across, or at stations without a centre stay as they are.
+        Returns the points and which of them (N,) moved."""
+        cloud = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if len(self.stations) < 2 or len(cloud) == 0 or not self.known.any():
+            return cloud.copy(), np.zeros(len(cloud), dtype=bool)
+        s = cumulative_length(self.stations)
+        u, _, se = _place(self.stations, s, self.lateral, self.normals, cloud)
+        k = np.clip(np.rint(se / STATION_M).astype(np.int64), 0, len(s) - 1)
+        half = max(float(np.median(self.half_width)), 1e-3)
+        offset = np.einsum("ij,ij->i", np.nan_to_num(self.centres) - self.stations, self.lateral)
+        move = self.known[k] & (np.abs(u) <= MAX_ACROSS * half) & (se >= 0.0) & (se <= s[-1])
+        du = np.where(move, offset[k] - u, 0.0)
+        return np.asarray(cloud + du[:, None] * self.lateral[k]), np.asarray(move)
 
     def onto_envelope(self, points: ArrayLike, station: NDArray[np.int64]) -> FloatArray:
         """``points`` (N, 3) below the outer envelope of their ``station`` (N,) moved along its
