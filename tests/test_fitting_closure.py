@@ -217,6 +217,22 @@ def test_closed_fit_bridges_and_reports_an_unobserved_arc(method: str) -> None:
     assert abs(end_angles[1] - gap[1]) < tolerance
 
 
+@pytest.mark.parametrize("seed", [4, 5])
+def test_closed_nurbs_bridges_a_third_of_a_ring_round_not_towards_its_chord(seed: int) -> None:
+    # 120 degrees of a 75 mm ring unseen. By its bending term alone the periodic fit flattened
+    # the gap towards its chord, 6.5 and 12.3 mm inside the ring for these seeds; guided by the
+    # bridge that continues both ends' turn it stays within 4 mm (3.9 and 2.4).
+    gap = (150.0, 270.0)
+    paint, surface = ring_scan(gap, seed=seed)
+    curve = fit_line(paint, surface, "nurbs", ScrapcutConfig())
+    assert curve.closed and curve.info["closure_reason"] == "unobserved_gap"
+    angle = np.degrees(np.mod(np.arctan2(curve.points[:, 1], curve.points[:, 0]), 2 * np.pi))
+    inside = (angle > gap[0]) & (angle < gap[1])
+    r = np.hypot(curve.points[:, 0], curve.points[:, 1])
+    assert np.max(np.hypot(r - RADIUS, curve.points[:, 2])[inside]) < 0.0045
+    assert mean_distance_to_circle(curve.points[~inside]) < 0.001
+
+
 def test_periodic_nurbs_matches_geomdl_and_closes_smoothly() -> None:
     paint, surface = ring_scan(seed=5)
     curve = fit_line(paint, surface, "nurbs", ScrapcutConfig())

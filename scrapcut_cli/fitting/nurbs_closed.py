@@ -12,9 +12,14 @@ columns are folded modulo n, and Dⱼ = n² (Pⱼ₋₁ − 2Pⱼ + Pⱼ₊₁) 
 second divided differences over the Greville abscissae, which are evenly spaced 1/n here).
 Closest-point parameters wrap round the loop instead of clamping. The initial parameters are
 arc lengths along the closure's loop (:mod:`~scrapcut_cli.fitting.closure`: the paint's chain
-closed by its bridge), so an arc no camera saw starts as a parameter span without data, and
-the bending term alone carries the curve across it: the curve that bends least in
-continuation of the fitted ends (flagged ``unobserved`` downstream).
+closed by its bridge), so an arc no camera saw starts as a parameter span without data. The
+bending term alone would carry the curve across it as the curve that bends least, which
+flattens a ring's gap towards its chord (12 mm inside a 75 mm ring over a third of it); so
+the gap holds guide points on the bridge that continues both ends' turn
+(:func:`~scrapcut_cli.fitting.closure.bridge_directions`, read over a few stroke widths, and
+:func:`~scrapcut_cli.fitting.closure.hermite_bridge`, scaled as a circular arc), each as
+heavy as the paint along as much of the line. The arc stays flagged ``unobserved``
+downstream.
 
 A closed curve has no ends to trim. Knot refinement and kinks are not tried (the knots stay
 uniform): a loop with sharp corners (a square cut-out) is rounded at the smoothing length.
@@ -36,7 +41,12 @@ from scipy.spatial import cKDTree
 
 from scrapcut_cli.config import NurbsConfig
 from scrapcut_cli.fitting._common import CanonicalFrame, as_points, canonical_order
-from scrapcut_cli.fitting.closure import Closure
+from scrapcut_cli.fitting.closure import (
+    UNOBSERVED_GAP,
+    Closure,
+    bridge_directions,
+    hermite_bridge,
+)
 from scrapcut_cli.fitting.curve import Curve, NurbsModel
 from scrapcut_cli.fitting.nurbs import (
     BAND_SMOOTHING,
@@ -53,6 +63,9 @@ FloatArray = NDArray[np.float64]
 
 #: Fewest control points of a closed curve per degree (a loop needs room to turn round).
 MIN_CONTROL_PER_DEGREE = 2
+#: Spacing of the guide points on the bridge over an unobserved gap, metres; each weighs as
+#: much as the paint along that length of the line.
+GUIDE_SPACING_M = 0.002
 
 
 @dataclass(frozen=True, eq=False)
@@ -114,6 +127,17 @@ def fit_closed_nurbs(
     frame = CanonicalFrame.of(pts)
     x_all = frame.to_local(pts)[canonical_order(frame.to_local(pts))]
     x, mass = _aggregate(x_all)
+    # Across an arc no camera saw, the curve follows the bridge that continues both ends'
+    # turn (``closure.bridge_directions``, ``hermite_bridge``) as though it were paint: the
+    # bending term alone would pull it towards the gap's chord (a ring's 120-degree gap: 12 mm
+    # inside a 75 mm ring).
+    guide = _gap_guide(frame.to_local(closure.chain), closure)
+    if len(guide):
+        density = float(mass.sum()) / max(
+            float(cumulative_length(frame.to_local(closure.chain))[-1]), 1e-9
+        )
+        x = np.vstack([x, guide])
+        mass = np.concatenate([mass, np.full(len(guide), density * GUIDE_SPACING_M)])
     loop = frame.to_local(closure.loop)
     loop_length = float(cumulative_length(closed_polyline(loop))[-1])
     t0 = loop_parameters(loop, x)
@@ -121,7 +145,12 @@ def fit_closed_nurbs(
 
     probe = replace(config, smoothing_length_m=max(config.smoothing_length_m, PROBE_SMOOTHING_M))
     first = _initial(x, mass, t0, n, loop_length, probe)
-    spread = float(np.sqrt(np.sum(mass * np.sum(first.residuals**2, axis=1)) / np.sum(mass)))
+    data = slice(0, len(x) - len(guide))  # the band's spread, not the guide's
+    spread = float(
+        np.sqrt(
+            np.sum(mass[data] * np.sum(first.residuals[data] ** 2, axis=1)) / np.sum(mass[data])
+        )
+    )
     ell = max(config.smoothing_length_m, BAND_SMOOTHING * spread)
     settings = replace(config, smoothing_length_m=ell)
     fit = _iterate(x, _initial(x, mass, t0, n, loop_length, settings), settings)
@@ -154,6 +183,16 @@ def fit_closed_nurbs(
             "smoothing_length_m": float(ell),
         },
     )
+
+
+def _gap_guide(chain: FloatArray, closure: Closure) -> FloatArray:
+    """Points (G, 3) every ``GUIDE_SPACING_M`` on the bridge over an unobserved gap, the
+    chain's frame, without its two ends; none when the loop was seen all round."""
+    if closure.reason != UNOBSERVED_GAP or len(chain) < 4 or closure.half_width_m <= 0.0:
+        return np.zeros((0, 3))
+    out_last, out_first = bridge_directions(chain, half_width_m=closure.half_width_m)
+    bridge = hermite_bridge(chain[-1], out_last, chain[0], out_first, spacing=GUIDE_SPACING_M)
+    return np.asarray(bridge[1:-1])
 
 
 def periodic_model(control_points: FloatArray, degree: int) -> NurbsModel:
