@@ -233,6 +233,43 @@ def test_closed_nurbs_bridges_a_third_of_a_ring_round_not_towards_its_chord(seed
     assert mean_distance_to_circle(curve.points[~inside]) < 0.001
 
 
+def test_a_ring_seen_one_sided_before_its_gap_is_centred_by_the_stroke_model() -> None:
+    # The last 40 degrees before an unobserved arc seen at a grazing angle: only the band's
+    # inner half and its inner edge. The paint's centre lies 6 mm inside the line there; the
+    # stroke model's (its one edge and the band's width) does not (NURBS 5.9 -> 2.7 mm mean).
+    from scrapcut_cli.fitting.stroke import StrokeObservations, stroke_model
+
+    gap = (200.0, 290.0)
+    paint, surface = ring_scan(gap, seed=4)
+    angle = np.degrees(np.mod(np.arctan2(paint[:, 1], paint[:, 0]), 2 * np.pi))
+    outside = np.hypot(paint[:, 0], paint[:, 1]) > RADIUS
+    paint = paint[~((angle > 160) & (angle < 200) & outside)]
+    paint = paint[np.argsort(np.mod(np.degrees(np.arctan2(paint[:, 1], paint[:, 0])) - 290, 360))]
+    seen = np.arange(0.0, 360.0, 0.5)
+    seen = seen[(seen < gap[0]) | (seen > gap[1])]
+    outer = seen[(seen < 160) | (seen > gap[1])]
+    edges = np.vstack(
+        [
+            circle_points(np.radians(seen), RADIUS - 0.0125),
+            circle_points(np.radians(outer), RADIUS + 0.0125),
+        ]
+    )
+    model = stroke_model(paint, StrokeObservations(edges=edges, surface=surface, voxel_m=0.002))
+    for stroke, worst in ((None, 0.005), (model, 0.0035)):
+        curve = fit_line(paint, surface, "nurbs", ScrapcutConfig(), stroke=stroke)
+        assert curve.closed and curve.info["closure_reason"] == "unobserved_gap"
+        a = np.degrees(np.mod(np.arctan2(curve.points[:, 1], curve.points[:, 0]), 2 * np.pi))
+        one_sided = curve.points[(a > 165) & (a < 200)]
+        if stroke is None:  # the paint's centre: off the line
+            assert mean_distance_to_circle(one_sided) > worst
+        else:
+            assert mean_distance_to_circle(one_sided) < worst
+
+
+def circle_points(phi: np.ndarray, radius: float) -> np.ndarray:
+    return np.column_stack([radius * np.cos(phi), radius * np.sin(phi), np.zeros_like(phi)])
+
+
 def test_periodic_nurbs_matches_geomdl_and_closes_smoothly() -> None:
     paint, surface = ring_scan(seed=5)
     curve = fit_line(paint, surface, "nurbs", ScrapcutConfig())

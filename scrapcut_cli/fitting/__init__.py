@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 from scrapcut_cli.config import FitMethod, ScrapcutConfig, choice_names
 from scrapcut_cli.errors import FittingError
 from scrapcut_cli.fitting._common import clip_to_extent
-from scrapcut_cli.fitting.closure import Closure, detect_closure, unobserved_arcs
+from scrapcut_cli.fitting.closure import UNOBSERVED_GAP, Closure, detect_closure, unobserved_arcs
 from scrapcut_cli.fitting.curve import Curve, NurbsModel
 from scrapcut_cli.fitting.ends import past_paint
 from scrapcut_cli.fitting.nurbs import (
@@ -73,11 +73,17 @@ def fit_curve(
 
     ``closure``: :func:`~scrapcut_cli.fitting.closure.detect_closure` of these points (and the
     surface around them); when it is closed the fit is a loop (a periodic NURBS, the
-    skeleton's cycle) and ``info`` holds the closure. None: an open fit.
+    skeleton's cycle) and ``info`` holds the closure. None: an open fit. A loop through an arc
+    no camera saw is an open band until then: with ``stroke`` its paint is moved onto the
+    stroke's centre first (``StrokeModel.recentre``).
     """
     if method not in METHODS:
         raise FittingError(f"unknown fitting method {method!r}; known: {', '.join(METHODS)}")
     if closure is not None and closure.closed:
+        if stroke is not None and closure.reason == UNOBSERVED_GAP:
+            # An arc no camera saw leaves an open band: its centre from its edges too (a band
+            # seen at a grazing angle near the gap shows one side of the stroke).
+            points_base = stroke.recentre(points_base)
         if method == "nurbs":
             curve = fit_closed_nurbs(points_base, closure=closure, config=config.nurbs)
         else:
