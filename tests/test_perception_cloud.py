@@ -484,3 +484,53 @@ def test_sorted_union_is_numpys_union_of_ascending_pixel_sets() -> None:
         a = np.unique(rng.integers(0, 500, rng.integers(0, 60)))
         b = np.unique(rng.integers(0, 500, rng.integers(0, 60)))
         np.testing.assert_array_equal(sorted_union(a, b), np.union1d(a, b))
+
+
+def _wide_blobs_by_boxes(
+    pixels: np.ndarray, depth: np.ndarray, camera: CameraModel, max_width_m: float
+) -> np.ndarray:
+    """split_wide_blobs' wide pixels the way it was first written: every blob's box from
+    scipy's find_objects over a labelled image."""
+    from scipy.ndimage import find_objects, label
+
+    height, width = depth.shape
+    mask = np.zeros(height * width, dtype=bool)
+    mask[pixels] = True
+    labels, n = label(mask.reshape(height, width), structure=np.ones((3, 3), dtype=bool))
+    blob = labels.reshape(-1)[pixels]
+    count = np.bincount(blob, minlength=n + 1)
+    focal = np.sqrt(camera.fx * camera.fy)
+    wide = np.zeros(n + 1, dtype=bool)
+    for k, box in enumerate(find_objects(labels), start=1):
+        diagonal = float(np.hypot(box[0].stop - box[0].start, box[1].stop - box[1].start))
+        blob_px = count[k] / max(diagonal, 1.0)
+        if blob_px * 3.0 / focal < max_width_m:
+            continue
+        z = np.take(depth.reshape(-1), pixels[blob == k][::7]).astype(np.float64)
+        z = z[np.isfinite(z) & (z > 0)]
+        if z.size and blob_px * float(np.median(z)) / focal > max_width_m:
+            wide[k] = True
+    return pixels[wide[blob]]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_split_wide_blobs_matches_boxes_of_every_blob(seed: int) -> None:
+    """Boxes only for blobs that could be wide (the others bounded by their pixel count):
+    the same split as boxing every blob, on specks, bands and squares at several depths."""
+    rng = np.random.default_rng(seed)
+    camera = small_camera()
+    h, w = camera.height, camera.width
+    v, u = np.mgrid[0:h, 0:w]
+    mask = rng.random((h, w)) < 0.02  # specks
+    for _ in range(6):
+        r0, c0 = int(rng.integers(0, h - 10)), int(rng.integers(0, w - 10))
+        mask[r0 : r0 + int(rng.integers(2, h)), c0 : c0 + int(rng.integers(2, w))] = True
+    mask |= np.abs(v - u * rng.uniform(0.2, 2.0)) < rng.uniform(1, 8)  # a slanted band
+    depth = rng.uniform(0.1, 1.5, (h, w)).astype(np.float32)
+    depth[rng.random((h, w)) < 0.1] = np.nan
+    pixels = np.flatnonzero(mask.ravel())
+    for max_width_m in (0.005, 0.02, 0.08, 0.3):
+        kept, wide = split_wide_blobs(pixels, depth, camera, max_width_m=max_width_m)
+        expected = _wide_blobs_by_boxes(pixels, depth, camera, max_width_m)
+        np.testing.assert_array_equal(wide, expected)
+        np.testing.assert_array_equal(np.sort(np.concatenate([kept, wide])), pixels)

@@ -239,3 +239,30 @@ def test_grey_images_have_no_dominant_hue() -> None:
     assert histogram.dominant() == []
     assert histogram.colourful_share() == 0.0
     assert "no saturated colours" in histogram.describe()
+
+
+def test_unit_histogram_counts_as_numpy() -> None:
+    """The saturation histogram's lean path bins every value as np.histogram does: all byte
+    saturations (float32), values on and one ulp either side of every edge (float32 and
+    float64), random values; NaN, values outside 0-1 and other dtypes go to numpy itself."""
+    from scrapcut_cli.perception.paint import _BINS, unit_histogram
+
+    cmax = np.repeat(np.arange(256), 256)
+    chroma = np.tile(np.arange(256), 256)
+    keep = chroma <= cmax
+    sat = chroma[keep].astype(np.float32) / np.maximum(cmax[keep].astype(np.float32), 1.0)
+    rng = np.random.default_rng(0)
+    cases: list[np.ndarray] = [sat, rng.random(50_000), rng.random(7).astype(np.float32)]
+    for dtype in (np.float32, np.float64):
+        edges = np.histogram(np.zeros(1, dtype=dtype), bins=_BINS, range=(0.0, 1.0))[1]
+        near = np.concatenate(
+            [edges, np.nextafter(edges, dtype(-1.0)), np.nextafter(edges, dtype(2.0))]
+        ).astype(dtype)
+        cases.append(near[(near >= 0) & (near <= 1)])
+    cases += [np.array([0.5, np.nan]), np.array([-0.1, 0.5, 1.5]), np.array([0, 1, 1])]
+    for values in cases:
+        counts, edges = unit_histogram(values)
+        expected, expected_edges = np.histogram(values, bins=_BINS, range=(0.0, 1.0))
+        np.testing.assert_array_equal(counts, expected)
+        np.testing.assert_array_equal(edges, expected_edges)
+        assert edges.dtype == expected_edges.dtype

@@ -291,3 +291,69 @@ def test_frames_without_paint_are_counted_not_fatal(sweep: list[Frame]) -> None:
     assert result.skip_reasons == {"no_paint": 1}
     assert result.tally.frames_with_paint == 2
     assert result.steps[1].growth == 0
+
+
+def _voxel_map_by_insertion(
+    batches: list[tuple[np.ndarray, np.ndarray, np.ndarray | None]], voxel: float
+) -> dict[str, np.ndarray]:
+    """The voxel map as first written: every array kept in key order, new voxels inserted."""
+    from scrapcut_cli.geometry import pack_voxel_keys, voxel_keys
+
+    keys = np.zeros(0, dtype=np.int64)
+    sums, rgb_sums, vps = np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3))
+    counts, frames = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    for points, viewpoint, rgb in batches:
+        k, inverse = np.unique(pack_voxel_keys(voxel_keys(points, voxel)), return_inverse=True)
+        c = np.bincount(inverse, minlength=k.size)
+        s = np.column_stack([np.bincount(inverse, points[:, i], k.size) for i in range(3)])
+        colours = np.full((len(points), 3), np.nan) if rgb is None else rgb
+        r = np.column_stack([np.bincount(inverse, colours[:, i], k.size) for i in range(3)])
+        pos = np.searchsorted(keys, k)
+        found = pos < keys.size
+        found[found] = keys[pos[found]] == k[found]
+        sums[pos[found]] += s[found]
+        rgb_sums[pos[found]] += r[found]
+        counts[pos[found]] += c[found]
+        frames[pos[found]] += 1
+        new = ~found
+        where = pos[new]
+        keys = np.insert(keys, where, k[new])
+        sums = np.insert(sums, where, s[new], axis=0)
+        rgb_sums = np.insert(rgb_sums, where, r[new], axis=0)
+        counts = np.insert(counts, where, c[new])
+        frames = np.insert(frames, where, 1)
+        vps = np.insert(vps, where, viewpoint, axis=0)
+    return {
+        "keys": keys,
+        "points": sums / counts[:, None],
+        "rgb": rgb_sums / counts[:, None],
+        "frames": frames,
+        "viewpoints": vps,
+    }
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_voxel_map_matches_sorted_insertion(seed: int) -> None:
+    """Values stored in first-seen order and read through the sorted keys' slots: the same
+    keys, means, colours, frame counts and viewpoints as keeping every array sorted."""
+    from scrapcut_cli.perception.stitch import _VoxelMap
+
+    rng = np.random.default_rng(seed)
+    voxel = 0.002
+    vmap = _VoxelMap(voxel, option="--stitch-voxel-mm")
+    batches: list[tuple[np.ndarray, np.ndarray, np.ndarray | None]] = []
+    centre = np.zeros(3)
+    for k in range(40):
+        centre = centre + rng.normal(0.0, 0.004, 3)  # a sweep: overlapping frames
+        points = centre + rng.normal(0.0, 0.01, (int(rng.integers(0, 900)), 3))
+        rgb = None if k % 5 == 3 else rng.random((len(points), 3))
+        viewpoint = centre + np.array([0.0, 0.0, 0.3])
+        batches.append((points, viewpoint, rgb))
+        vmap.add(points, viewpoint, rgb)
+        assert len(vmap) == len(np.unique(vmap.keys))
+    expected = _voxel_map_by_insertion(batches, voxel)
+    np.testing.assert_array_equal(vmap.keys, expected["keys"])
+    np.testing.assert_allclose(vmap.points, expected["points"], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(vmap.rgb, expected["rgb"], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(vmap.frames, expected["frames"])
+    np.testing.assert_array_equal(vmap.viewpoints, expected["viewpoints"])

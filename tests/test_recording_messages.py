@@ -322,3 +322,17 @@ def test_raw_tf_transforms_leave_anything_else_to_rosbags() -> None:
     ros1 = _ros1_tf(_tf_sample())[0]
     for bad in (ros1[:-1], ros1 + b"\x00", ros1[:4]):
         assert m.raw_tf_transforms(bad, cdr=False) is None
+
+
+def test_raw_tf_transforms_name_cache_gives_the_same_names() -> None:
+    """Frame names are looked up by their bytes once decoded: a second read of the same
+    message (and of names with a leading slash) gives what rosbags' decoding gives."""
+    T = np.eye(4)
+    msg = m.tf_msg(7, [("/world", "/base", T), ("base", "tool", T), ("/world", "cam", T)])
+    raw = m.serialize(msg, m.TF_MESSAGE)
+    expected = m.tf_transforms(m.typestore().deserialize_cdr(raw, m.TF_MESSAGE))
+    m._TF_NAMES.clear()
+    first = m.raw_tf_transforms(raw, cdr=True)
+    second = m.raw_tf_transforms(raw, cdr=True)
+    assert first == second == expected
+    assert [t[:2] for t in expected] == [("world", "base"), ("base", "tool"), ("world", "cam")]

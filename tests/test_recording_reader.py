@@ -397,3 +397,36 @@ def test_reference_in_another_frame_is_moved_to_the_base(tmp_path: Path) -> None
         assert rec.exploration_log() == []
     with open_recording(path, RecordingConfig(base_frame="table")) as rec:
         np.testing.assert_allclose(rec.reference(), [[0, 0, 0], [0.1, 0, 0]])
+
+
+@pytest.mark.parametrize("head_bytes", [40, 64, 4096])
+def test_sqlite_index_reads_image_heads_with_the_same_result(
+    recordings: dict[str, Path], monkeypatch: pytest.MonkeyPatch, head_bytes: int
+) -> None:
+    """A sqlite3 bag's index pass reads only the first bytes of each raw image (the whole
+    message when its header does not fit): the same stamps, frame ids and sizes as reading
+    every image whole, each head the start of its message, in the same order."""
+    from scrapcut_cli.recording import reader as reader_module
+
+    monkeypatch.setattr(reader_module, "IMAGE_HEAD_BYTES", head_bytes)
+    path = recordings["ros2-sqlite3"]
+    with open_recording(path) as rec:
+        topics = [rec.color_topic, rec.depth_topic]
+        heads = rec._sqlite_image_heads(topics)
+        assert heads is not None
+        heads = list(heads)
+        full = list(rec.raw_messages(topics))
+        assert [h[:3] for h in heads] == [f[:3] for f in full]
+        assert all(bytes(f[3]).startswith(h[3]) for h, f in zip(heads, full, strict=True))
+        shorter = [len(h[3]) < len(f[3]) for h, f in zip(heads, full, strict=True)]
+        if head_bytes == 40:  # no room for the header and size: every message whole
+            assert not any(shorter)
+        if head_bytes == 64:
+            assert all(shorter)
+        fast = rec._image_headers()
+    monkeypatch.setattr(reader_module, "_sqlite_storages", lambda reader: None)
+    with open_recording(path) as rec:
+        slow = rec._image_headers()
+        assert rec._sqlite_image_heads(topics) is None
+    for a, b in zip(fast, slow, strict=True):
+        assert (a.topic, a.stamps, a.frame_id, a.size) == (b.topic, b.stamps, b.frame_id, b.size)

@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.ndimage import find_objects, label, maximum_filter
+from scipy.ndimage import label, maximum_filter
 from scipy.spatial import cKDTree
 
 from scrapcut_cli._open3d import o3d
@@ -304,7 +304,7 @@ def split_wide_blobs(
 @dataclass(frozen=True, eq=False)
 class _Blobs:
     """The 8-connected blobs of a set of pixels: ``blob`` (K,) the label of each (1..n),
-    ``count`` (n + 1,) pixels per label, ``boxes`` their bounding slices.
+    ``count`` (n + 1,) pixels per label.
 
     scipy's labelling is the costly step (0.65 ms for a whole 640x480 frame), so it runs on
     the box the pixels span only (they are sorted by row), once for both blob tests."""
@@ -312,7 +312,6 @@ class _Blobs:
     blob: NDArray[np.intp]
     n: int
     count: NDArray[np.intp]
-    boxes: list[Any]
 
     @classmethod
     def of(cls, pixels: NDArray[np.intp], width: int) -> _Blobs:
@@ -325,7 +324,7 @@ class _Blobs:
         mask[local] = True
         labels, n = label(mask.reshape(-1, box_w), structure=_EIGHT)
         blob = labels.reshape(-1)[local]
-        return cls(blob, int(n), np.bincount(blob, minlength=n + 1), find_objects(labels))
+        return cls(blob, int(n), np.bincount(blob, minlength=n + 1))
 
     def small(
         self,
@@ -359,15 +358,24 @@ class _Blobs:
     ) -> NDArray[np.bool_]:
         """(n + 1,) the blobs wider than ``max_width_m`` (see split_wide_blobs)."""
         focal = np.sqrt(camera.fx * camera.fy)
+        width = depth_m.shape[1]
         wide = np.zeros(self.n + 1, dtype=bool)
-        for k, box in enumerate(self.boxes, start=1):
-            if box is None:
+        # A blob's box holds its pixels, so its diagonal is at least sqrt(2 * count) and its
+        # width in pixels (count / diagonal) at most sqrt(count / 2): a blob narrower than
+        # the limit even so, 3 m away, needs no box (most are specks; the margin covers
+        # rounding). The others' boxes come from their own pixels (rows ascending).
+        bound = np.sqrt(self.count / 2.0) * 3.0 / focal
+        for k in np.flatnonzero(bound >= max_width_m * (1.0 - 1e-9)):
+            if k == 0:
                 continue
-            diagonal = float(np.hypot(box[0].stop - box[0].start, box[1].stop - box[1].start))
+            own = pixels[self.blob == k]
+            cols = own % width
+            rows = int(own[-1] // width) - int(own[0] // width) + 1
+            diagonal = float(np.hypot(rows, int(cols.max()) - int(cols.min()) + 1))
             blob_px = self.count[k] / max(diagonal, 1.0)
             if blob_px * 3.0 / focal < max_width_m:  # narrower than that even 3 m away
                 continue
-            z = np.take(depth_m.reshape(-1), pixels[self.blob == k][::7]).astype(np.float64)
+            z = np.take(depth_m.reshape(-1), own[::7]).astype(np.float64)
             z = z[np.isfinite(z) & (z > 0)]
             if z.size and blob_px * float(np.median(z)) / focal > max_width_m:
                 wide[k] = True

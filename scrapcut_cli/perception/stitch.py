@@ -118,24 +118,47 @@ class StitchStep:
 class _VoxelMap:
     """Running-mean points on a world-aligned voxel grid, keyed by packed voxel index.
 
-    Keys are kept sorted, so a frame is merged with one ``searchsorted`` and one ``insert``
-    (vectorised, no Python loop over points) and the output order is deterministic. Each voxel
-    also counts the frames that put a point in it (``frames``): a voxel's points are averaged,
-    its frames say how often it was seen.
+    Keys are kept sorted, so a frame is merged with one ``searchsorted`` (vectorised, no
+    Python loop over points) and the output order is deterministic. Each voxel also counts
+    the frames that put a point in it (``frames``): a voxel's points are averaged, its frames
+    say how often it was seen. The per-voxel values are stored in the order the voxels were
+    first seen (appended, with room to grow), the sorted keys carrying each one's slot: a new
+    frame's voxels shift two integer arrays, not all six; the properties read them in key
+    order.
     """
 
     def __init__(self, voxel_size_m: float, *, option: str) -> None:
         self.voxel_size_m = voxel_size_m
         self.option = option  # the command-line option that sets the voxel, for messages
-        self.keys = np.zeros(0, dtype=np.int64)
-        self.sums = np.zeros((0, 3))
-        self.counts = np.zeros(0, dtype=np.int64)
-        self.frames = np.zeros(0, dtype=np.int64)
-        self.viewpoints = np.zeros((0, 3))
-        self.rgb_sums = np.zeros((0, 3))  # NaN once a point of unknown colour fell in
+        self.keys = np.zeros(0, dtype=np.int64)  # sorted
+        self._slot = np.zeros(0, dtype=np.intp)  # each sorted key's slot in the arrays below
+        self._sums = np.zeros((0, 3))
+        self._counts = np.zeros(0, dtype=np.int64)
+        self._frames = np.zeros(0, dtype=np.int64)
+        self._viewpoints = np.zeros((0, 3))
+        self._rgb_sums = np.zeros((0, 3))  # NaN once a point of unknown colour fell in
 
     def __len__(self) -> int:
         return int(self.keys.size)
+
+    def _sorted(self, values: NDArray[Any]) -> NDArray[Any]:
+        return np.asarray(values[self._slot])
+
+    @property
+    def sums(self) -> FloatArray:
+        return self._sorted(self._sums)
+
+    @property
+    def counts(self) -> NDArray[np.int64]:
+        return self._sorted(self._counts)
+
+    @property
+    def frames(self) -> NDArray[np.int64]:
+        return self._sorted(self._frames)
+
+    @property
+    def viewpoints(self) -> FloatArray:
+        return self._sorted(self._viewpoints)
 
     @property
     def points(self) -> FloatArray:
@@ -144,7 +167,7 @@ class _VoxelMap:
     @property
     def rgb(self) -> FloatArray:
         """Mean sRGB (N, 3) in 0-1 of what fell in each voxel (NaN: unknown)."""
-        return np.asarray(self.rgb_sums / self.counts[:, None])
+        return np.asarray(self._sorted(self._rgb_sums) / self.counts[:, None])
 
     def add(self, points: FloatArray, viewpoint: FloatArray, rgb: ArrayLike | None = None) -> int:
         """Merge points (N, 3) with sRGB colours ``rgb`` (N, 3) in 0-1 (None: unknown); new
@@ -172,36 +195,60 @@ class _VoxelMap:
         rgb_sums = np.column_stack(
             [np.bincount(inverse, weights=colours[:, i], minlength=keys.size) for i in range(3)]
         )
+        n = self.keys.size
         pos = np.searchsorted(self.keys, keys)
-        found = pos < self.keys.size
+        found = pos < n
         found[found] = self.keys[pos[found]] == keys[found]
-        self.sums[pos[found]] += sums[found]
-        self.rgb_sums[pos[found]] += rgb_sums[found]
-        self.counts[pos[found]] += counts[found]
-        self.frames[pos[found]] += 1
+        slots = self._slot[pos[found]]
+        self._sums[slots] += sums[found]
+        self._rgb_sums[slots] += rgb_sums[found]
+        self._counts[slots] += counts[found]
+        self._frames[slots] += 1
         new = ~found
         n_new = int(new.sum())
         if n_new == 0:
             return 0
-        # np.insert's result, computed once for the six arrays: the new voxels go to their
-        # insertion points shifted by the new voxels before them, the old ones fill the rest.
+        self._append(n, sums[new], rgb_sums[new], counts[new], viewpoint)
+        # np.insert's result for the two index arrays: the new keys go to their insertion
+        # points shifted by the new keys before them, the old ones fill the rest.
         at = pos[new] + np.arange(n_new)
-        old = np.ones(self.keys.size + n_new, dtype=bool)
+        old = np.ones(n + n_new, dtype=bool)
         old[at] = False
-
-        def merged(current: NDArray[Any], added: ArrayLike) -> NDArray[Any]:
-            out = np.empty((old.size, *current.shape[1:]), dtype=current.dtype)
-            out[old] = current
-            out[at] = added
-            return out
-
-        self.keys = merged(self.keys, keys[new])
-        self.sums = merged(self.sums, sums[new])
-        self.rgb_sums = merged(self.rgb_sums, rgb_sums[new])
-        self.counts = merged(self.counts, counts[new])
-        self.frames = merged(self.frames, 1)
-        self.viewpoints = merged(self.viewpoints, viewpoint)
+        keys_out = np.empty(n + n_new, dtype=np.int64)
+        keys_out[old] = self.keys
+        keys_out[at] = keys[new]
+        slot_out = np.empty(n + n_new, dtype=np.intp)
+        slot_out[old] = self._slot
+        slot_out[at] = np.arange(n, n + n_new)
+        self.keys, self._slot = keys_out, slot_out
         return n_new
+
+    def _append(
+        self,
+        n: int,
+        sums: NDArray[Any],
+        rgb_sums: NDArray[Any],
+        counts: NDArray[Any],
+        viewpoint: FloatArray,
+    ) -> None:
+        """Store new voxels' values in slots n, n + 1, ... (growing the arrays by half)."""
+        end = n + len(counts)
+        if end > len(self._counts):
+            room = max(end, len(self._counts) * 3 // 2, 1024)
+
+            def grown(values: NDArray[Any]) -> NDArray[Any]:
+                out = np.zeros((room, *values.shape[1:]), dtype=values.dtype)
+                out[:n] = values[:n]
+                return out
+
+            self._sums, self._rgb_sums = grown(self._sums), grown(self._rgb_sums)
+            self._counts, self._frames = grown(self._counts), grown(self._frames)
+            self._viewpoints = grown(self._viewpoints)
+        self._sums[n:end] = sums
+        self._rgb_sums[n:end] = rgb_sums
+        self._counts[n:end] = counts
+        self._frames[n:end] = 1
+        self._viewpoints[n:end] = viewpoint
 
 
 def check_stitch_config(config: StitchConfig) -> None:

@@ -708,7 +708,10 @@ def raw_tf_transforms(raw: bytes | memoryview, *, cdr: bool) -> list[TfTransform
     """
     buf = memoryview(raw)
     n_bytes = len(buf)
-    out = []
+    out: list[TfTransform] = []
+    names = _TF_NAMES
+    if len(names) > _TF_NAMES_MAX:  # frame names are few; anything else must not pile up
+        names.clear()
     try:
         if cdr:
             if n_bytes < 4 or buf[0] != 0 or buf[2] != 0 or buf[3] != 0 or buf[1] > 1:
@@ -720,20 +723,28 @@ def raw_tf_transforms(raw: bytes | memoryview, *, cdr: bool) -> list[TfTransform
             pos = 4
             for _ in range(count):
                 sec, nanosec = stamp.unpack_from(data, pos)
-                pos += 8
-                names = []
-                for _ in range(2):
-                    pos = (pos + 3) & ~3
-                    (length,) = u32.unpack_from(data, pos)
-                    end = pos + 4 + length
-                    if length < 1 or end > size or data[end - 1] != 0:
-                        return None
-                    names.append(bytes(data[pos + 4 : end - 1]).decode())
-                    pos = end
-                pos = (pos + 7) & ~7
+                pos = (pos + 11) & ~3
+                (length,) = u32.unpack_from(data, pos)
+                end = pos + 4 + length
+                if length < 1 or end > size or data[end - 1] != 0:
+                    return None
+                key = bytes(data[pos + 4 : end - 1])
+                parent = names.get(key)
+                if parent is None:
+                    parent = names[key] = _strip_slash(key.decode())
+                pos = (end + 3) & ~3
+                (length,) = u32.unpack_from(data, pos)
+                end = pos + 4 + length
+                if length < 1 or end > size or data[end - 1] != 0:
+                    return None
+                key = bytes(data[pos + 4 : end - 1])
+                child = names.get(key)
+                if child is None:
+                    child = names[key] = _strip_slash(key.decode())
+                pos = (end + 7) & ~7
                 v = floats.unpack_from(data, pos)
                 pos += 56
-                out.append(_tf_entry(names, sec, nanosec, v))
+                out.append((parent, child, sec * 1_000_000_000 + nanosec, v[:3], v[3:]))
             if pos + 3 < size:  # rosbags' size check: at most the alignment padding after
                 return None
         else:
@@ -743,22 +754,28 @@ def raw_tf_transforms(raw: bytes | memoryview, *, cdr: bool) -> list[TfTransform
             for _ in range(count):
                 _, sec, nanosec = _TF_ROS1_HEAD.unpack_from(buf, pos)
                 pos += 12
-                names = []
+                pair = []
                 for _ in range(2):
                     (length,) = u32.unpack_from(buf, pos)
                     end = pos + 4 + length
                     if end > n_bytes:
                         return None
-                    names.append(bytes(buf[pos + 4 : end]).decode())
+                    pair.append(bytes(buf[pos + 4 : end]).decode())
                     pos = end
                 v = floats.unpack_from(buf, pos)
                 pos += 56
-                out.append(_tf_entry(names, sec, nanosec, v))
+                out.append(_tf_entry(pair, sec, nanosec, v))
             if pos != n_bytes:
                 return None
     except (struct.error, UnicodeDecodeError, IndexError):
         return None
     return out
+
+
+#: Frame names of /tf transforms by their bytes, leading slash removed (a recording's /tf
+#: repeats the same few names thousands of times).
+_TF_NAMES: dict[bytes, str] = {}
+_TF_NAMES_MAX = 4096
 
 
 def _tf_entry(names: list[str], sec: int, nanosec: int, values: tuple[float, ...]) -> TfTransform:

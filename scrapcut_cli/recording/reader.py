@@ -18,9 +18,11 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import itertools
 import json
 import os
 import stat
+import struct
 import tempfile
 from collections.abc import Collection, Generator, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -630,7 +632,15 @@ class Recording:
                 raise RecordingError(f"colour and depth topics are the same: {color.topic}")
             topics += [color.topic, depth.topic]
         image_headers = {h.topic: h for h in (color, depth) if h is not None}
-        for topic, msgtype, _, raw in self.raw_messages(topics):
+        # A raw image's header and size lie in its first bytes: from a sqlite3 bag only those
+        # are read (a 1280x720 depth image is 1.8 MB), the messages in the same order.
+        heads = self._sqlite_image_heads(list(image_headers)) if image_headers else None
+        messages: Iterable[tuple[str, str, int, bytes]] = self.raw_messages(
+            list(tf_topics) if heads is not None else topics
+        )
+        if heads is not None:
+            messages = itertools.chain(messages, heads)
+        for topic, msgtype, _, raw in messages:
             if topic in tf_topics:
                 if msgtype in m.TF_TYPES:
                     transforms = m.raw_tf_transforms(raw, cdr=self._cdr)
@@ -660,6 +670,56 @@ class Recording:
                     "aligned to colour (--depth-topic)"
                 )
             self._headers = (color, depth)
+
+    def _sqlite_image_heads(
+        self, topics: Sequence[str]
+    ) -> Iterator[tuple[str, str, int, bytes]] | None:
+        """:meth:`raw_messages` of image topics for the index pass, reading only the head
+        (:data:`IMAGE_HEAD_BYTES`) of a raw Image that holds its header and size; None when
+        the recording is not a single-file, uncompressed ROS 2 sqlite3 bag (read as usual).
+
+        rosbags' own query with the message's row id for its data, then SQLite's incremental
+        blob reads: the same messages in the same order, the heads' bytes the messages'.
+        """
+        storages = _sqlite_storages(self._reader)
+        if storages is None or not self._cdr:
+            return None
+        conns = self._conns(topics)
+        if not conns:
+            return None
+        return self._read_sqlite_heads(storages, conns)
+
+    def _read_sqlite_heads(
+        self, storages: list[Any], conns: list[Any]
+    ) -> Iterator[tuple[str, str, int, bytes]]:
+        try:
+            for storage in storages:
+                wanted = {}
+                for x in storage.connections:
+                    y = next((c for c in conns if _same_connection(x, c)), None)
+                    if y is not None:
+                        wanted[x.id] = y
+                if not wanted:
+                    continue
+                ids = tuple(wanted)
+                query = (
+                    "SELECT topics.id,messages.timestamp,messages.id "
+                    "FROM messages JOIN topics ON messages.topic_id=topics.id "
+                    f"WHERE topics.id IN ({','.join('?' for _ in ids)}) ORDER BY timestamp"
+                )
+                db = storage.dbconn
+                for cid, log_time, rowid in list(db.execute(query, ids)):
+                    conn = wanted[cid]
+                    with db.blob_open("main", "messages", "data", rowid, False) as blob:
+                        raw = blob.read(IMAGE_HEAD_BYTES if conn.msgtype == m.IMAGE else -1)
+                        if conn.msgtype == m.IMAGE and not _image_head_complete(raw):
+                            blob.seek(0)
+                            raw = blob.read()
+                    yield conn.topic, conn.msgtype, int(log_time), raw
+        except RecordingError:
+            raise
+        except Exception as exc:  # apsw on damaged data
+            raise RecordingError(self._damaged(exc)) from None
 
     # ------------------------------------------------------------------ frames
 
@@ -1004,6 +1064,50 @@ def _map_sqlite_storage(reader: Any) -> None:
                     pass
             except Exception:  # an optimisation only: read as before
                 continue
+
+
+#: Bytes of a raw Image read in the index pass: CDR header, frame id, height and width.
+IMAGE_HEAD_BYTES = 4096
+
+
+def _image_head_complete(head: bytes) -> bool:
+    """True if the first bytes of a CDR Image hold its whole header and its height and width
+    (a frame id of up to ~4000 characters), or are the whole message."""
+    if len(head) < IMAGE_HEAD_BYTES:
+        return True  # the message itself
+    order = "<" if head[1] else ">"
+    (size,) = struct.unpack_from(order + "I", head, 12)  # the frame id's length
+    return 16 + size + 3 + 8 <= len(head)
+
+
+def _sqlite_storages(reader: Any) -> list[Any] | None:
+    """The sqlite3 storages (apsw connections) of a ROS 2 bag rosbags reads from one folder
+    without per-message compression; None for anything else."""
+    readers: list[Any] = list(getattr(reader, "readers", None) or [])
+    if len(readers) != 1:
+        return None
+    directory = getattr(readers[0], "storage", None)
+    storages = getattr(directory, "storages", None)
+    metadata = getattr(directory, "metadata", None)
+    if not storages or getattr(metadata, "compression_mode", "message") == "message":
+        return None
+    for storage in storages:
+        db = getattr(storage, "dbconn", None)
+        if not (hasattr(db, "blob_open") and hasattr(db, "execute")):
+            return None
+        if not hasattr(storage, "connections"):
+            return None
+    return list(storages)
+
+
+def _same_connection(x: Any, y: Any) -> bool:
+    """rosbags' match of a storage's connection to the reader's (rosbag2 DirectoryReader)."""
+    return bool(
+        y.topic == x.topic
+        and y.msgtype == x.msgtype
+        and y.ext == x.ext
+        and (not x.digest or not y.digest or y.digest == x.digest)
+    )
 
 
 def _has_mcap_footer(path: Path) -> bool:
