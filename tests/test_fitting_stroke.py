@@ -339,3 +339,16 @@ def test_both_fits_follow_a_sharp_groove_across_the_stroke() -> None:
         root = np.abs(x - GROOVE[0]) < 0.001
         assert err[root].max() < worst, curve.method
         assert err.mean() < 0.0006, curve.method
+
+
+def test_a_model_that_knows_no_centre_leaves_the_skeleton_as_without_one(plate: tuple) -> None:
+    # Nothing to collapse onto: the skeleton is centred on the paint as it lies, not left on
+    # its voxel path.
+    paint, observations = plate
+    model = stroke_model(paint, observations)
+    blind = replace(model, kind=np.zeros_like(model.kind))
+    config = SkeletonConfig(leaf_size_m=0.02)
+    with_model = fit_skeleton(paint, config=config, stroke=blind).points
+    without = fit_skeleton(paint, config=config).points
+    assert with_model.shape == without.shape
+    np.testing.assert_allclose(with_model, without, atol=1e-9)

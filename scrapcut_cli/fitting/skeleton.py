@@ -255,9 +255,10 @@ def fit_skeleton(
     if stroke is not None:
         xc, moved = stroke.collapse(pts)
         keep = (point_piece >= 0) if len(bridge) else inside
-        centred = frame.to_local(xc)[keep & moved]
+        if np.any(keep & moved):  # a model that knows no centre leaves the band as it is
+            centred = frame.to_local(xc)[keep & moved]
     window = _window(moving_average(path, 3), paint, config)
-    centring = _window(moving_average(path, 3), centred, config) if len(centred) else window
+    centring = _window(moving_average(path, 3), centred, config)
     stations = resample_polyline(path, _STATION_M)
     centre = moving_average(stations, 2 * round(window / _STATION_M) + 1)
     reach = max(3.0 * leaf, 2.0 * window)
