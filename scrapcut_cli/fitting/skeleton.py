@@ -279,6 +279,11 @@ def fit_skeleton(
             corner_angle=float(np.radians(config.corner_angle_deg)),
             smoothing=int(config.smoothing_window),
         )
+        if centred is not paint:
+            # Past the collapsed paint (a round cap) the stations have nothing to centre on:
+            # cut them, at most a window in from the paint's ends (a mesh's ends may hold no
+            # centre for longer, and the line may turn there), and reach the paint straight.
+            centre = _cut_to_centred(centre, targets, paint, config, window=window)
         centre = _extend_to_data(centre, paint, config, span=window)
     ends = stroke_ends(
         centre,
@@ -719,6 +724,28 @@ def _extend_to_data(
         path, paint, quantile=config.end_quantile, radius=config.refine_radius_m, span=span
     )
     return clip_to_extent(path, lo, hi, span=span)
+
+
+def _cut_to_centred(
+    path: FloatArray,
+    centred: FloatArray,
+    paint: FloatArray,
+    config: SkeletonConfig,
+    *,
+    window: float,
+) -> FloatArray:
+    """The path cut to where the collapsed paint ``centred`` begins and ends along it, but at
+    most ``window`` in from where the paint itself does."""
+    a, b = data_extent(
+        path, centred, quantile=config.end_quantile, radius=config.refine_radius_m, span=window
+    )
+    lo, hi = data_extent(
+        path, paint, quantile=config.end_quantile, radius=config.refine_radius_m, span=window
+    )
+    a, b = min(max(a, lo), lo + window), max(min(b, hi), hi - window)
+    if b - a <= 2.0 * window:
+        return path
+    return clip_to_extent(path, a, b, span=window)
 
 
 def _trim(path: FloatArray, length: float) -> FloatArray:
