@@ -131,11 +131,10 @@ def fit_closed_nurbs(
     # turn (``closure.bridge_directions``, ``hermite_bridge``) as though it were paint: the
     # bending term alone would pull it towards the gap's chord (a ring's 120-degree gap: 12 mm
     # inside a 75 mm ring).
-    guide = _gap_guide(frame.to_local(closure.chain), closure)
+    chain = frame.to_local(closure.chain)
+    guide = _gap_guide(chain, closure)
     if len(guide):
-        density = float(mass.sum()) / max(
-            float(cumulative_length(frame.to_local(closure.chain))[-1]), 1e-9
-        )
+        density = float(mass.sum()) / max(float(cumulative_length(chain)[-1]), 1e-9)
         x = np.vstack([x, guide])
         mass = np.concatenate([mass, np.full(len(guide), density * GUIDE_SPACING_M)])
     loop = frame.to_local(closure.loop)

@@ -257,8 +257,9 @@ def fit_skeleton(
         keep = (point_piece >= 0) if len(bridge) else inside
         if np.any(keep & moved):  # a model that knows no centre leaves the band as it is
             centred = frame.to_local(xc)[keep & moved]
-    window = _window(moving_average(path, 3), paint, config)
-    centring = _window(moving_average(path, 3), centred, config)
+    smoothed = moving_average(path, 3)
+    window = _window(smoothed, paint, config)
+    centring = _window(smoothed, centred, config)
     stations = resample_polyline(path, _STATION_M)
     centre = moving_average(stations, 2 * round(window / _STATION_M) + 1)
     reach = max(3.0 * leaf, 2.0 * window)

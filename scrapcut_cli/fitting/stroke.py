@@ -66,7 +66,7 @@ Numpy and scipy (KD-tree, medians) only: no library models a stroke by its edges
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -113,6 +113,22 @@ FRAME_JUMP_DEG = 60.0
 
 #: What a section saw: both edges, one, none (its centre is unknown).
 BOTH, ONE, NONE = 2, 1, 0
+
+
+class _Placement(NamedTuple):
+    """Where points (N,) lie against a model's stations (K,), metres: the stations' arc
+    lengths ``s`` (K,); each point's lateral and normal offsets ``u``, ``w`` (N,) in its
+    nearest station's frame (:func:`_place`) and that ``station`` (N,); the median
+    ``half`` width; each station's centre ``offset`` across the line (K,); and which points
+    are ``near`` (N,): within ``MAX_ACROSS`` half widths and the line's extent."""
+
+    s: FloatArray
+    u: FloatArray
+    w: FloatArray
+    station: IntArray
+    half: float
+    offset: FloatArray
+    near: NDArray[np.bool_]
 
 
 @dataclass(frozen=True, eq=False)
@@ -211,13 +227,8 @@ class StrokeModel:
         known = self.known
         if len(self.stations) < 2 or len(cloud) == 0 or not known.any():
             return cloud.copy()
-        s = cumulative_length(self.stations)
-        u, w, se = _place(self.stations, s, self.lateral, self.normals, cloud)
+        s, u, w, k, half, offset, near = self._placed(cloud)
         n = len(s)
-        k = np.clip(np.rint(se / STATION_M).astype(np.int64), 0, n - 1)
-        half = max(float(np.median(self.half_width)), 1e-3)
-        offset = np.einsum("ij,ij->i", np.nan_to_num(self.centres) - self.stations, self.lateral)
-        near = (np.abs(u) <= MAX_ACROSS * half) & (se >= 0.0) & (se <= s[-1])
         middle = near & (np.abs(u - offset[k]) <= half / 3.0)
 
         def slab_sums(mask: NDArray[np.bool_], values: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -276,14 +287,21 @@ class StrokeModel:
         cloud = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if len(self.stations) < 2 or len(cloud) == 0 or not self.known.any():
             return cloud.copy(), np.zeros(len(cloud), dtype=bool)
+        placed = self._placed(cloud)
+        k = placed.station
+        move = self.known[k] & placed.near
+        du = np.where(move, placed.offset[k] - placed.u, 0.0)
+        return np.asarray(cloud + du[:, None] * self.lateral[k]), np.asarray(move)
+
+    def _placed(self, cloud: FloatArray) -> _Placement:
+        """Where the points (N, 3) lie against the stations (see :class:`_Placement`)."""
         s = cumulative_length(self.stations)
-        u, _, se = _place(self.stations, s, self.lateral, self.normals, cloud)
+        u, w, se = _place(self.stations, s, self.lateral, self.normals, cloud)
         k = np.clip(np.rint(se / STATION_M).astype(np.int64), 0, len(s) - 1)
         half = max(float(np.median(self.half_width)), 1e-3)
         offset = np.einsum("ij,ij->i", np.nan_to_num(self.centres) - self.stations, self.lateral)
-        move = self.known[k] & (np.abs(u) <= MAX_ACROSS * half) & (se >= 0.0) & (se <= s[-1])
-        du = np.where(move, offset[k] - u, 0.0)
-        return np.asarray(cloud + du[:, None] * self.lateral[k]), np.asarray(move)
+        near = (np.abs(u) <= MAX_ACROSS * half) & (se >= 0.0) & (se <= s[-1])
+        return _Placement(s, u, w, k, half, offset, near)
 
     def onto_envelope(self, points: ArrayLike, station: NDArray[np.int64]) -> FloatArray:
         """``points`` (N, 3) below the outer envelope of their ``station`` (N,) moved along its
