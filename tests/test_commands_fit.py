@@ -426,7 +426,7 @@ def closed_recordings(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Pat
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("method", ["nurbs"])  # the skeleton's loop: test_fitting_closure
+@pytest.mark.parametrize("method", ["nurbs", "skeleton"])
 @pytest.mark.parametrize("name", CLOSED_OBJECTS)
 def test_fit_closes_a_loop_and_reports_what_no_frame_saw(
     closed_recordings: dict[str, Path], tmp_path: Path, name: str, method: str
@@ -445,6 +445,11 @@ def test_fit_closes_a_loop_and_reports_what_no_frame_saw(
     # small recordings hold them too).
     assert error["closed"] and error["observed_from"] == "truth"
     assert error["observed_mean_mm"] <= 1.0 and error["observed_coverage"] == 1.0
+    if method == "skeleton":
+        # The ring's band is seen at a grazing angle under the pipe, one side of it lost: the
+        # skeleton centres on the stroke model's collapsed band there, as an open line's does
+        # (0.25 mm; 0.45 when it centred on the recentred paint and ran straight to the tips).
+        assert error["observed_mean_mm"] <= 0.35
     flagged = np.array(["unobserved" in f for f in path.flags])
     if name == "pipe_ring":
         assert summary["fitter_info"]["closure_reason"] == "unobserved_gap"

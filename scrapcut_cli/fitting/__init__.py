@@ -74,20 +74,24 @@ def fit_curve(
     ``closure``: :func:`~scrapcut_cli.fitting.closure.detect_closure` of these points (and the
     surface around them); when it is closed the fit is a loop (a periodic NURBS, the
     skeleton's cycle) and ``info`` holds the closure. None: an open fit. A loop through an arc
-    no camera saw is an open band until then: with ``stroke`` its paint is moved onto the
-    stroke's centre first (``StrokeModel.recentre``).
+    no camera saw is an open band until then: with ``stroke`` the NURBS fit takes its paint
+    moved onto the stroke's centre (``StrokeModel.recentre``), the skeleton the model itself,
+    centring its open band on the collapsed paint as an open line's fit does.
     """
     if method not in METHODS:
         raise FittingError(f"unknown fitting method {method!r}; known: {', '.join(METHODS)}")
     if closure is not None and closure.closed:
-        if stroke is not None and closure.reason == UNOBSERVED_GAP:
-            # An arc no camera saw leaves an open band: its centre from its edges too (a band
-            # seen at a grazing angle near the gap shows one side of the stroke).
-            points_base = stroke.recentre(points_base)
+        # An arc no camera saw leaves an open band: its centre from its edges too (a band
+        # seen at a grazing angle near the gap shows one side of the stroke).
+        open_band = stroke if closure.reason == UNOBSERVED_GAP else None
         if method == "nurbs":
+            if open_band is not None:
+                points_base = open_band.recentre(points_base)
             curve = fit_closed_nurbs(points_base, closure=closure, config=config.nurbs)
         else:
-            curve = fit_skeleton(points_base, config=config.skeleton, closure=closure)
+            curve = fit_skeleton(
+                points_base, config=config.skeleton, closure=closure, stroke=open_band
+            )
         curve.info["closure"] = closure.info()
         curve.info["closure_reason"] = closure.reason
         return curve

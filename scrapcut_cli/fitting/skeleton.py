@@ -212,8 +212,27 @@ def fit_skeleton(
     path = thinning.skeleton[order].astype(np.float64) * leaf
     # With a stroke model every kept point is the band's (its side paint included).
     paint = x[point_piece >= 0] if len(bridge) else x[inside]
+    # The band's centre, with the stroke model: its width taken out where the model knows
+    # the centre (``StrokeModel.collapse``), so the centring resolves the line's shape along
+    # it (a groove's dip) at the leaf, not at the band's width, and a band seen on one side
+    # only (its far edge lost at a grazing view) is not centred on what is left of it; where
+    # the model knows no centre (a hole, a wire along the line), the model's line across.
+    centred = paint
+    if stroke is not None:
+        xc, moved = stroke.collapse(pts)
+        keep = (point_piece >= 0) if len(bridge) else inside
+        if np.any(keep & moved):  # a model that knows no centre leaves the band as it is
+            centred = frame.to_local(xc)[keep & moved]
+    # Across a gap the model's line is all there is to centre on.
+    if len(bridge):
+        gap = ~np.isfinite(cKDTree(centred).query(bridge, distance_upper_bound=0.5 * leaf)[0])
+        targets = np.vstack([centred, bridge[gap]])
+    else:
+        targets = centred
     if closure is not None and closure.closed:
-        centre, how = _closed_centre(thinning.skeleton, path, paint, frame, closure, config)
+        centre, how = _closed_centre(
+            thinning.skeleton, path, paint, targets, frame, closure, config
+        )
         polyline = resample_loop(centre, config.sample_spacing_m)
         dist, _ = arc_positions(closed_polyline(polyline), x, step=0.00025)
         near = dist[inside]
@@ -247,16 +266,6 @@ def fit_skeleton(
     # onto its corner, and at a fine leaf size the skeleton of a holey band wanders across it.
     # Thinning forks at the band's ends (towards its corners): cut a window off each end, then
     # extend straight to the paint.
-    # The band's centre, with the stroke model: its width taken out where the model knows
-    # the centre (``StrokeModel.collapse``), so the centring resolves the line's shape along
-    # it (a groove's dip) at the leaf, not at the band's width; where it does not (a hole, a
-    # wire along the line), the model's line across.
-    centred = paint
-    if stroke is not None:
-        xc, moved = stroke.collapse(pts)
-        keep = (point_piece >= 0) if len(bridge) else inside
-        if np.any(keep & moved):  # a model that knows no centre leaves the band as it is
-            centred = frame.to_local(xc)[keep & moved]
     smoothed = moving_average(path, 3)
     window = _window(smoothed, paint, config)
     centring = _window(smoothed, centred, config)
@@ -264,12 +273,6 @@ def fit_skeleton(
     centre = moving_average(stations, 2 * round(window / _STATION_M) + 1)
     reach = max(3.0 * leaf, 2.0 * window)
     centre = _extend_to_data(_trim(centre, window), paint, config, span=window)
-    # Across a gap the model's line is all there is to centre on.
-    if len(bridge):
-        gap = ~np.isfinite(cKDTree(centred).query(bridge, distance_upper_bound=0.5 * leaf)[0])
-        targets = np.vstack([centred, bridge[gap]])
-    else:
-        targets = centred
     for _ in range(int(config.refine_iterations)):
         centre = _centre_on_paint(
             centre,
@@ -773,6 +776,7 @@ def _closed_centre(
     skeleton: IntArray,
     path: FloatArray,
     paint: FloatArray,
+    targets: FloatArray,
     frame: CanonicalFrame,
     closure: Closure,
     config: SkeletonConfig,
@@ -782,19 +786,22 @@ def _closed_centre(
     or ``path+bridge`` (its longest path, centred as an open line's, closed across the gap by
     the cubic that continues both ends, their directions read over a few stroke widths:
     :func:`~scrapcut_cli.fitting.closure.bridge_directions`). Oriented and started as the
-    closure's chain."""
+    closure's chain. The path is centred on ``targets`` (the paint with the stroke model's
+    width taken out where it knows the centre, else ``paint`` itself); ``paint`` bounds it."""
     leaf = float(config.leaf_size_m)
     chain = frame.to_local(closure.chain)
     loop_length = float(cumulative_length(closed_polyline(frame.to_local(closure.loop)))[-1])
     cycle = _largest_cycle(skeleton, min_length=0.5 * loop_length / leaf)
-    window = _window(moving_average(path, 3), paint, config)
+    smoothed = moving_average(path, 3)
+    window = _window(smoothed, paint, config)
+    centring = _window(smoothed, targets, config)
     reach = max(3.0 * leaf, 2.0 * window)
 
     def centre_on_paint(polyline: FloatArray) -> FloatArray:
         return _centre_on_paint(
             polyline,
-            paint,
-            window=window,
+            targets,
+            window=centring,
             radius=config.refine_radius_m,
             corner_reach=reach,
             corner_angle=float(np.radians(config.corner_angle_deg)),
@@ -817,7 +824,10 @@ def _closed_centre(
     centre = moving_average(stations, 2 * round(window / _STATION_M) + 1)
     centre = _extend_to_data(_trim(centre, window), paint, config, span=window)
     for _ in range(int(config.refine_iterations)):
-        centre = _extend_to_data(centre_on_paint(centre), paint, config, span=window)
+        centre = centre_on_paint(centre)
+        if targets is not paint:  # past the collapsed paint nothing to centre on (open lines)
+            centre = _cut_to_centred(centre, targets, paint, config, window=window)
+        centre = _extend_to_data(centre, paint, config, span=window)
     if np.linalg.norm(centre[0] - chain[0]) > np.linalg.norm(centre[0] - chain[-1]):
         centre = centre[::-1]
     # The centre is cut where the paint ends, then closed across the gap.
