@@ -395,3 +395,38 @@ def test_the_skeleton_reaches_a_one_sided_start_straight() -> None:
         start = curve.points[curve.points[:, 0] < 0.02]
         worst.append(float(np.abs(start[:, 1]).max()))
     assert np.mean(worst) < 0.0036
+
+
+def test_the_model_keeps_the_paint_s_whole_extent_where_its_ends_are_one_sided() -> None:
+    # The first 30 mm show the stroke's - edge only (a wire along one side of a mesh, a band
+    # seen at a grazing angle): the sections within a half width of the start know no centre.
+    # The second pass's line still starts where the paint does (it was cut back to the first
+    # known centre, 14 mm in, and the paint before it left to the fitters as it lay).
+    paint, observations = scene(seed=2)
+    edges = observations.edges
+    plus = (edges[:, 1] - true_y(edges[:, 0])) > 0
+    edges = edges[~(plus & (edges[:, 0] < 0.03))]
+    model = stroke_model(paint, replace(observations, edges=edges))
+    assert model.stations[0, 0] < 0.004
+    assert np.all(model.kind[model.stations[:, 0] < 0.006] == NONE)
+    known = model.known
+    assert lateral_error(model.centres[known]).max() < 0.0015
+
+
+def test_one_crossing_of_a_mesh_does_not_set_the_local_width() -> None:
+    # Six neighbouring sections at one wire's crossing see both edges 8 mm apart (the wire's
+    # own paint tilts their tangent); the band beyond them is 12.5 mm wide. One crossing is
+    # one measurement: the stations near it take the whole line's width.
+    from scrapcut_cli.fitting.stroke import _local_half_width
+
+    s = np.arange(0.0, 0.3, 0.002)
+    halves = np.full(len(s), np.nan)
+    both = np.zeros(len(s), dtype=bool)
+    crossing = (s > 0.03) & (s < 0.042)
+    band_part = s > 0.1
+    halves[crossing], halves[band_part] = 0.008, 0.0125
+    both[crossing | band_part] = True
+    width, _ = _local_half_width(s, halves, both, 0.012)
+    assert width[0] == pytest.approx(0.0125) and width[20] == pytest.approx(0.0125)
+    # Along the band, its own running median.
+    assert np.allclose(width[s > 0.15], 0.0125)

@@ -31,7 +31,10 @@ The recipe (:func:`stroke_model`):
    ``MIN_WINDOW_M`` until each side holds ``MIN_EDGE_POINTS``, up to the stroke's half width
    (a wire mesh's crossings are centimetres apart).
 4. **Width.** The half widths (u₊ − u₋)/2 of the sections that see both edges, as a running
-   median along the line (± ``WIDTH_WINDOW_M``; the whole line's median where there is none).
+   median along the line (± ``WIDTH_WINDOW_M``; the whole line's median where there is none,
+   or where those sections spread over less than ``WIDTH_SPAN_HALVES`` half widths: one
+   crossing of a wire mesh, its few edge points seen by several neighbouring sections across
+   a tangent its own paint tilts, is one narrow measurement).
 5. **The centre.** Both edges seen: their midpoint. One: that edge moved in by the local half
    width. None (a hole wider than the stroke, a wire along the line, a stretch never seen):
    unknown — the fitters bridge it with the curve's smoothness. Within a half width of the
@@ -39,6 +42,10 @@ The recipe (:func:`stroke_model`):
    height over the surface comes from the edges and the paint near it (b offsets).
 6. **Twice**: the centres found (straight across the unknown stretches, smoothed over a half
    width) are the next provisional line, so cross sections are taken across the line itself.
+   Past the first and last known centre the stations are carried along by its offset, so the
+   line keeps the paint's whole extent: cut back to the known centres, each pass lost the
+   ends, and the paint there (a cap, a wire crossing it) was left as it lay for the fitters
+   to follow off the line.
 7. **The outer envelope** (:func:`_envelope`). On a layered mesh or grate the line is drawn on
    the piece's outer envelope, where the torch cuts, but where it runs between the outer wires
    the spray lands on the layer below. Where the stroke is perforated and the surface within
@@ -94,8 +101,10 @@ SLAB_M = 0.005
 MIN_WINDOW_M = 0.003
 #: ... and grows until each side holds this many edge points (2 mm voxels of edge).
 MIN_EDGE_POINTS = 3
-#: Half window of the running median of the half width along the line, metres.
+#: Half window of the running median of the half width along the line, metres; the two-edge
+#: sections in it must spread over at least this many half widths along the line.
 WIDTH_WINDOW_M = 0.05
+WIDTH_SPAN_HALVES = 3.0
 #: Radius of the surface that gives a station its lateral direction, metres.
 FRAME_RADIUS_M = 0.02
 #: Edge points farther than this many half widths across the line, or more than this many off
@@ -363,7 +372,7 @@ def stroke_model(
             guess = float(model.info["half_width_m"])
         if not model.known.any():
             break
-        line = _smooth_line(model.line(), guess)
+        line = _smooth_line(_carried(model.stations, model.centres, model.known), guess)
     assert model is not None
     return _with_envelope(
         model, paint, surface, observations.envelope_reach_m, observations.paint_viewpoints
@@ -410,6 +419,20 @@ def _bridged(stations: FloatArray, centres: FloatArray, known: NDArray[np.bool_]
     idx = np.arange(len(stations))
     out = np.column_stack([np.interp(idx, idx[known], centres[known, k]) for k in range(3)])
     return np.asarray(out)
+
+
+def _carried(stations: FloatArray, centres: FloatArray, known: NDArray[np.bool_]) -> FloatArray:
+    """The next provisional line: known centres, straight across unknown stretches between
+    them, and past the first and last known centre the stations moved by that centre's
+    offset (the line keeps the paint's whole extent, its caps included)."""
+    line = _bridged(stations, centres, known)
+    if not known.any():
+        return line
+    idx = np.flatnonzero(known)
+    first, last = int(idx[0]), int(idx[-1])
+    line[:first] = stations[:first] + (centres[first] - stations[first])
+    line[last + 1 :] = stations[last + 1 :] + (centres[last] - stations[last])
+    return line
 
 
 # --------------------------------------------------------------------------- sections
@@ -1024,9 +1047,10 @@ def _local_half_width(
     s: FloatArray, halves: FloatArray, both: NDArray[np.bool_], guess: float
 ) -> tuple[FloatArray, FloatArray]:
     """Local half width (K,) at every station — the running median of the two-edge sections'
-    half widths within ± ``WIDTH_WINDOW_M`` (the whole line's where none is that near, the
-    guess where there is none at all) — and its uncertainty (K,): the robust spread of those
-    half widths (how much the width varies along the line), metres."""
+    half widths within ± ``WIDTH_WINDOW_M`` (the whole line's where fewer than three are that
+    near or they spread over less than ``WIDTH_SPAN_HALVES`` half widths ``guess`` along the
+    line, the guess where there is none at all) — and its uncertainty (K,): the robust spread
+    of those half widths (how much the width varies along the line), metres."""
     k = len(s)
     if not both.any():
         return np.full(k, guess), np.full(k, 0.25 * guess)
@@ -1040,7 +1064,10 @@ def _local_half_width(
     table = hs[np.minimum(idx, len(hs) - 1)]
     local = _row_median(table, mask)
     local_sd = np.maximum(1.4826 * _row_median(np.abs(table - local[:, None]), mask), 1e-4)
-    enough = mask.sum(axis=1) >= 3
+    # A wire's crossing gives a few neighbouring sections from the same edge points, taken
+    # across a tangent its own paint tilts: one measurement, however many sections.
+    spread = ss[np.maximum(hi - 1, 0)] - ss[np.minimum(lo, len(ss) - 1)]
+    enough = (mask.sum(axis=1) >= 3) & (spread >= WIDTH_SPAN_HALVES * guess)
     return np.where(enough, local, overall), np.where(enough, local_sd, overall_sd)
 
 
