@@ -414,7 +414,7 @@ def test_the_model_keeps_the_paint_s_whole_extent_where_its_ends_are_one_sided()
 
 
 def test_one_crossing_of_a_mesh_does_not_set_the_local_width() -> None:
-    # Six neighbouring sections at one wire's crossing see both edges 8 mm apart (the wire's
+    # Five neighbouring sections at one wire's crossing see both edges 8 mm apart (the wire's
     # own paint tilts their tangent); the band beyond them is 12.5 mm wide. One crossing is
     # one measurement: the stations near it take the whole line's width.
     from scrapcut_cli.fitting.stroke import _local_half_width
