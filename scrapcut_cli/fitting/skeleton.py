@@ -231,7 +231,7 @@ def fit_skeleton(
         targets = centred
     if closure is not None and closure.closed:
         centre, how = _closed_centre(
-            thinning.skeleton, path, paint, targets, frame, closure, config
+            thinning.skeleton, path, paint, centred, targets, frame, closure, config
         )
         polyline = resample_loop(centre, config.sample_spacing_m)
         dist, _ = arc_positions(closed_polyline(polyline), x, step=0.00025)
@@ -262,33 +262,7 @@ def fit_skeleton(
             },
         )
 
-    # Smooth the voxel path over a window first: paint beside a stair step would all project
-    # onto its corner, and at a fine leaf size the skeleton of a holey band wanders across it.
-    # Thinning forks at the band's ends (towards its corners): cut a window off each end, then
-    # extend straight to the paint.
-    smoothed = moving_average(path, 3)
-    window = _window(smoothed, paint, config)
-    centring = _window(smoothed, centred, config)
-    stations = resample_polyline(path, _STATION_M)
-    centre = moving_average(stations, 2 * round(window / _STATION_M) + 1)
-    reach = max(3.0 * leaf, 2.0 * window)
-    centre = _extend_to_data(_trim(centre, window), paint, config, span=window)
-    for _ in range(int(config.refine_iterations)):
-        centre = _centre_on_paint(
-            centre,
-            targets,
-            window=centring,
-            radius=config.refine_radius_m,
-            corner_reach=reach,
-            corner_angle=float(np.radians(config.corner_angle_deg)),
-            smoothing=int(config.smoothing_window),
-        )
-        if centred is not paint:
-            # Past the collapsed paint (a round cap) the stations have nothing to centre on:
-            # cut them, at most a window in from the paint's ends (a mesh's ends may hold no
-            # centre for longer, and the line may turn there), and reach the paint straight.
-            centre = _cut_to_centred(centre, targets, paint, config, window=window)
-        centre = _extend_to_data(centre, paint, config, span=window)
+    centre, window = _centre_band(path, paint, centred, targets, config)
     ends = stroke_ends(
         centre,
         paint,
@@ -720,6 +694,67 @@ def _meeting_point(before: FloatArray, after: FloatArray, *, reach: float) -> Fl
     return np.asarray(meet)
 
 
+def _centring(
+    path: FloatArray,
+    paint: FloatArray,
+    centred: FloatArray,
+    targets: FloatArray,
+    config: SkeletonConfig,
+) -> tuple[float, float, Callable[[FloatArray], FloatArray]]:
+    """The arc-length half window (metres) along the voxel ``path`` over which the centre is
+    resolved, the reach (metres) within which a corner is kept apart (twice the window, at
+    least three leaves), and the step that moves a polyline onto the centre of ``targets``
+    (windows from ``paint`` and from the ``centred`` paint, :func:`_window`)."""
+    smoothed = moving_average(path, 3)
+    window = _window(smoothed, paint, config)
+    centring = _window(smoothed, centred, config)
+    reach = max(3.0 * float(config.leaf_size_m), 2.0 * window)
+
+    def centre_on(polyline: FloatArray) -> FloatArray:
+        return _centre_on_paint(
+            polyline,
+            targets,
+            window=centring,
+            radius=config.refine_radius_m,
+            corner_reach=reach,
+            corner_angle=float(np.radians(config.corner_angle_deg)),
+            smoothing=int(config.smoothing_window),
+        )
+
+    return window, reach, centre_on
+
+
+def _centre_band(
+    path: FloatArray,
+    paint: FloatArray,
+    centred: FloatArray,
+    targets: FloatArray,
+    config: SkeletonConfig,
+) -> tuple[FloatArray, float]:
+    """The voxel ``path`` (K, 3) of an open band moved onto its centre, and the centring's
+    arc-length half window (metres); canonical frame.
+
+    The path is smoothed over a window first: paint beside a stair step would all project
+    onto its corner, and at a fine leaf size the skeleton of a holey band wanders across it.
+    Thinning forks at the band's ends (towards its corners): a window is cut off each end,
+    then the path is extended straight to the ``paint``. It is centred on ``targets`` (the
+    ``centred`` paint, collapsed where the stroke model knows the centre, and the model's line
+    across gaps); past the collapsed paint (a round cap) the stations have nothing to centre
+    on: they are cut, at most a window in from the paint's ends (a mesh's ends may hold no
+    centre for longer, and the line may turn there), and reach the paint straight.
+    """
+    window, _, centre_on = _centring(path, paint, centred, targets, config)
+    stations = resample_polyline(path, _STATION_M)
+    centre = moving_average(stations, 2 * round(window / _STATION_M) + 1)
+    centre = _extend_to_data(_trim(centre, window), paint, config, span=window)
+    for _ in range(int(config.refine_iterations)):
+        centre = centre_on(centre)
+        if centred is not paint:
+            centre = _cut_to_centred(centre, targets, paint, config, window=window)
+        centre = _extend_to_data(centre, paint, config, span=window)
+    return centre, window
+
+
 def _extend_to_data(
     path: FloatArray, paint: FloatArray, config: SkeletonConfig, *, span: float
 ) -> FloatArray:
@@ -776,6 +811,7 @@ def _closed_centre(
     skeleton: IntArray,
     path: FloatArray,
     paint: FloatArray,
+    centred: FloatArray,
     targets: FloatArray,
     frame: CanonicalFrame,
     closure: Closure,
@@ -783,51 +819,28 @@ def _closed_centre(
 ) -> tuple[FloatArray, str]:
     """The centre of a closed line's paint, as a loop's vertices (K, 3), canonical frame, and
     where the loop came from: ``cycle`` (the skeleton's own cycle round paint seen all round)
-    or ``path+bridge`` (its longest path, centred as an open line's, closed across the gap by
-    the cubic that continues both ends, their directions read over a few stroke widths:
-    :func:`~scrapcut_cli.fitting.closure.bridge_directions`). Oriented and started as the
-    closure's chain. The path is centred on ``targets`` (the paint with the stroke model's
-    width taken out where it knows the centre, else ``paint`` itself); ``paint`` bounds it."""
+    or ``path+bridge`` (its longest path, centred as an open line's by :func:`_centre_band`,
+    closed across the gap by the cubic that continues both ends, their directions read over a
+    few stroke widths: :func:`~scrapcut_cli.fitting.closure.bridge_directions`). Oriented and
+    started as the closure's chain."""
     leaf = float(config.leaf_size_m)
     chain = frame.to_local(closure.chain)
     loop_length = float(cumulative_length(closed_polyline(frame.to_local(closure.loop)))[-1])
     cycle = _largest_cycle(skeleton, min_length=0.5 * loop_length / leaf)
-    smoothed = moving_average(path, 3)
-    window = _window(smoothed, paint, config)
-    centring = _window(smoothed, targets, config)
-    reach = max(3.0 * leaf, 2.0 * window)
-
-    def centre_on_paint(polyline: FloatArray) -> FloatArray:
-        return _centre_on_paint(
-            polyline,
-            targets,
-            window=centring,
-            radius=config.refine_radius_m,
-            corner_reach=reach,
-            corner_angle=float(np.radians(config.corner_angle_deg)),
-            smoothing=int(config.smoothing_window),
-        )
-
     if cycle is not None:
+        window, reach, centre_on = _centring(path, paint, centred, targets, config)
         loop = skeleton[cycle].astype(np.float64) * leaf
         stations = resample_loop(loop, _STATION_M)
         half = round(window / _STATION_M)
         centre = _loop_average(stations, 2 * half + 1)
         for _ in range(int(config.refine_iterations)):
-            centre = _centre_loop(centre, centre_on_paint, pad=window + 2.0 * reach)
+            centre = _centre_loop(centre, centre_on, pad=window + 2.0 * reach)
         return _as_chain(centre, chain), "cycle"
     if float(np.dot(path[-1] - path[0], chain[-1] - chain[0])) < 0.0 and (
         np.linalg.norm(path[0] - chain[-1]) < np.linalg.norm(path[0] - chain[0])
     ):
         path = path[::-1]
-    stations = resample_polyline(path, _STATION_M)
-    centre = moving_average(stations, 2 * round(window / _STATION_M) + 1)
-    centre = _extend_to_data(_trim(centre, window), paint, config, span=window)
-    for _ in range(int(config.refine_iterations)):
-        centre = centre_on_paint(centre)
-        if targets is not paint:  # past the collapsed paint nothing to centre on (open lines)
-            centre = _cut_to_centred(centre, targets, paint, config, window=window)
-        centre = _extend_to_data(centre, paint, config, span=window)
+    centre, _ = _centre_band(path, paint, centred, targets, config)
     if np.linalg.norm(centre[0] - chain[0]) > np.linalg.norm(centre[0] - chain[-1]):
         centre = centre[::-1]
     # The centre is cut where the paint ends, then closed across the gap.
