@@ -81,6 +81,36 @@ def test_compressed_jpeg_is_close_on_a_smooth_picture() -> None:
     assert np.abs(rgb.astype(int) - smooth).mean() < 2.0
 
 
+@pytest.mark.parametrize(("mode", "subsampling"), [("RGB", 2), ("RGB", 0), ("L", -1), ("CMYK", 0)])
+def test_jpeg_decodes_to_pillow_s_pixels(mode: str, subsampling: int) -> None:
+    # The libjpeg-turbo fast path (colour, grey) and Pillow's (CMYK) give Pillow's pixels.
+    noisy = np.random.default_rng(3).integers(0, 256, (37, 53, 3), dtype=np.uint8)
+    buffer = io.BytesIO()
+    Image.fromarray(noisy).convert(mode).save(
+        buffer, format="JPEG", quality=90, subsampling=subsampling
+    )
+    msg = m.compressed_image_msg(5, "cam", noisy, fmt="jpeg")
+    msg.data = np.frombuffer(buffer.getvalue(), np.uint8)
+    rgb = m.decode_color(_roundtrip(msg, m.COMPRESSED_IMAGE), m.COMPRESSED_IMAGE)
+    with Image.open(io.BytesIO(buffer.getvalue())) as img:
+        expected = np.asarray(img.convert("RGB"))
+    assert rgb.dtype == np.uint8 and rgb.shape == (37, 53, 3)
+    assert not rgb.flags.writeable
+    np.testing.assert_array_equal(rgb, expected)
+
+
+@pytest.mark.parametrize("damage", ["garbage", "truncated"])
+def test_a_damaged_jpeg_is_one_recording_error(damage: str) -> None:
+    noisy = np.random.default_rng(4).integers(0, 256, (48, 64, 3), dtype=np.uint8)
+    msg = m.compressed_image_msg(5, "cam", noisy, fmt="jpeg")
+    data = np.asarray(msg.data, np.uint8).tobytes()
+    if damage == "garbage":
+        data = b"\xff\xd8\xff\xe0 not a jpeg after all"
+    msg.data = np.frombuffer(data[: len(data) // 2] if damage == "truncated" else data, np.uint8)
+    with pytest.raises(RecordingError, match="cannot decode compressed image"):
+        m.decode_color(msg, m.COMPRESSED_IMAGE)
+
+
 def test_depth_16uc1_is_millimetres_with_zero_invalid() -> None:
     msg = _roundtrip(m.image_msg(5, "cam", DEPTH_MM), m.IMAGE)
     depth = m.decode_depth(msg, m.IMAGE)
