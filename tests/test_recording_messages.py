@@ -83,7 +83,7 @@ def test_compressed_jpeg_is_close_on_a_smooth_picture() -> None:
 
 @pytest.mark.parametrize(("mode", "subsampling"), [("RGB", 2), ("RGB", 0), ("L", -1), ("CMYK", 0)])
 def test_jpeg_decodes_to_pillow_s_pixels(mode: str, subsampling: int) -> None:
-    # The libjpeg-turbo fast path (colour, grey) and Pillow's (CMYK) give Pillow's pixels.
+    # Colour, grey and CMYK JPEGs all come out as Pillow's RGB conversion of them.
     noisy = np.random.default_rng(3).integers(0, 256, (37, 53, 3), dtype=np.uint8)
     buffer = io.BytesIO()
     Image.fromarray(noisy).convert(mode).save(

@@ -556,19 +556,10 @@ def decode_color(msg: Any, msgtype: str) -> NDArray[np.uint8]:
     return _readonly(np.ascontiguousarray(rgb))
 
 
-#: JPEG colour spaces libjpeg-turbo (simplejpeg) turns into RGB exactly as Pillow does; the
-#: others (CMYK, YCCK) go through Pillow's conversion.
-_FAST_JPEG_SPACES = frozenset({"YCbCr", "Gray"})
-
-
 def _decode_compressed_color(msg: Any) -> NDArray[np.uint8]:
     from PIL import Image, UnidentifiedImageError
 
     data = np.asarray(msg.data, dtype=np.uint8).tobytes()
-    if data[:2] == b"\xff\xd8":
-        rgb = _decode_jpeg_fast(data)
-        if rgb is not None:
-            return rgb
     try:
         with Image.open(io.BytesIO(data)) as img:
             # convert() copies even when the image is RGB already (a colour JPEG always is).
@@ -576,22 +567,6 @@ def _decode_compressed_color(msg: Any) -> NDArray[np.uint8]:
     except (UnidentifiedImageError, OSError) as exc:
         raise RecordingError(f"cannot decode compressed image ({msg.format!r}): {exc}") from None
     return np.ascontiguousarray(rgb)
-
-
-def _decode_jpeg_fast(data: bytes) -> NDArray[np.uint8] | None:
-    """(H, W, 3) uint8 RGB of a colour or grey JPEG decoded by libjpeg-turbo straight into an
-    array (simplejpeg): the same pixels as Pillow's decoder (libjpeg-turbo's accurate integer
-    DCT and fancy upsampling too) in about half the time at 1280x720, Pillow's copy out of its
-    image buffer included. None for what it does not take (other colour spaces, damage):
-    Pillow then decodes or names the problem."""
-    import simplejpeg
-
-    try:
-        if simplejpeg.decode_jpeg_header(data)[2] not in _FAST_JPEG_SPACES:
-            return None
-        return np.asarray(simplejpeg.decode_jpeg(data, colorspace="RGB"), dtype=np.uint8)
-    except ValueError:
-        return None
 
 
 def decode_depth(msg: Any, msgtype: str) -> NDArray[np.float32]:
