@@ -22,9 +22,10 @@ The recipe (:func:`stroke_model`):
 
 1. **A provisional centre line** through the paint: its geodesic order (``ordering``), slab
    centroids every ``SLAB_M``, gaps bridged straight, smoothed over about a half width.
-2. **Stations** every ``STATION_M`` along it, each with a frame: the tangent t, the lateral
-   direction a (across the line in the surface: the direction in which the observed surface
-   around the station, projected across t, spreads most) and b = t × a (the normal).
+2. **Stations** every ``STATION_M`` along it, each with a frame: the tangent t (the line's
+   direction over ± ``FRAME_SMOOTH_HALVES`` half widths), the lateral direction a (across the
+   line in the surface: the direction in which the observed surface around the station,
+   projected across t, spreads most) and b = t × a (the normal).
 3. **Cross sections.** The stroke's edge points are placed by their station and their lateral
    offset u = (e − P)·a; the edge points within a window along the line are split by the sign
    of u, and each side's edge is the median of its offsets. The window grows from
@@ -105,6 +106,8 @@ MIN_EDGE_POINTS = 3
 #: sections in it must spread over at least this many half widths along the line.
 WIDTH_WINDOW_M = 0.05
 WIDTH_SPAN_HALVES = 3.0
+#: A station's tangent: the line's direction over ± this many half widths.
+FRAME_SMOOTH_HALVES = 2.0
 #: Radius of the surface that gives a station its lateral direction, metres.
 FRAME_RADIUS_M = 0.02
 #: Edge points farther than this many half widths across the line, or more than this many off
@@ -438,18 +441,26 @@ def _carried(stations: FloatArray, centres: FloatArray, known: NDArray[np.bool_]
 # --------------------------------------------------------------------------- sections
 
 
-def _frames(line: FloatArray, context: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+def _frames(
+    line: FloatArray, context: FloatArray, half_width: float
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Unit tangent, lateral and normal (K, 3) of every station of ``line``.
 
-    The lateral direction is the principal direction of the observed points within
-    ``FRAME_RADIUS_M`` of the line and of the station along it, projected onto the plane
-    across the tangent (a stroke and the surface around it spread across the line, not along
-    its normal); signs are kept continuous along the line. Covariances come from cumulative
+    The tangent is the line's direction smoothed over ± ``FRAME_SMOOTH_HALVES`` half widths:
+    on broken paint (a wire mesh) the line runs through centres a few millimetres apart across
+    it and a centimetre along, and its own direction tilted the sections by 10-25 degrees (a
+    band measured across such a tilt is narrower by its cosine, and a one-edge centre moves by
+    the tilt times how far along the window its edge points lie). The lateral direction is
+    the principal direction of the observed points within ``FRAME_RADIUS_M`` of the line and
+    of the station along it, projected onto the plane across the tangent (a stroke and the
+    surface around it spread across the line, not along its normal); signs are kept
+    continuous along the line. Covariances come from cumulative
     sums over the points sorted along the line (no loop over points or stations)."""
     k = len(line)
     if k < 2:
         return np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]), np.array([[0, 0, 1.0]])
-    tangent = np.gradient(line, axis=0)
+    window = 2 * max(round(FRAME_SMOOTH_HALVES * half_width / STATION_M), 0) + 1
+    tangent = np.gradient(moving_average(line, window), axis=0)
     tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
     helper = np.where(np.abs(tangent[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
     e1 = np.cross(tangent, helper)
@@ -509,7 +520,7 @@ def _sections(
 ) -> StrokeModel:
     """Cross sections of the edges across ``line`` (K, 3): steps 2-5 of the module text."""
     k = len(line)
-    tangent, lateral, normal = _frames(line, context)
+    tangent, lateral, normal = _frames(line, context, half_guess)
     s = cumulative_length(line)
     length = float(s[-1]) if k else 0.0
     floor = voxel_m / np.sqrt(12.0)
