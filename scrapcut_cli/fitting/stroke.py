@@ -454,8 +454,8 @@ def _frames(
     the principal direction of the observed points within ``FRAME_RADIUS_M`` of the line and
     of the station along it, projected onto the plane across the tangent (a stroke and the
     surface around it spread across the line, not along its normal); signs are kept
-    continuous along the line. Covariances come from cumulative
-    sums over the points sorted along the line (no loop over points or stations)."""
+    continuous along the line. Covariances come from cumulative sums over the points sorted
+    along the line (no loop over points or stations)."""
     k = len(line)
     if k < 2:
         return np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]), np.array([[0, 0, 1.0]])
