@@ -204,6 +204,38 @@ def test_a_wire_across_the_cap_places_the_end():
     assert abs(ends.end - BASKET_LENGTH) < 0.003
 
 
+def test_paint_on_a_wire_along_the_line_ends_by_the_strokes_own_width():
+    # A mesh with a 4 mm wire along the middle of the stroke and wires across it every 40 mm:
+    # the paint's profile is the wire's (3 mm half width), and a cap read off it put the ends
+    # 6-11 mm past the line's (the cap's paint along the wire reaches a whole half width
+    # beyond). With the stroke's half width from its edges the envelope places them: never
+    # past the line's end by more than a millimetre, 3.5 mm short on average (a ragged
+    # stroke's cap is up to 15 % narrower than the stroke; the wire's last sample lies up to
+    # a sample's spacing inside it).
+    before, after = [], []
+    for seed in range(6):
+        pts = painted_stroke(LINE, NORMALS, caps=True, seed=seed)
+        x, y = pts[:, 0], pts[:, 1]
+        across = np.abs((x + 0.027) - 0.04 * np.round((x + 0.027) / 0.04)) <= 0.002
+        mesh = pts[(np.abs(y - 0.001) <= 0.002) | across]
+        old = ends_on_line(mesh)
+        new = ends_on_line(mesh, band_half_width=0.0125)
+        assert old.half_width is not None and old.half_width < 0.005
+        assert new.shapes == ("gapped", "gapped") and new.half_width == 0.0125
+        before += [-old.start, old.end - 0.5]  # how far past the line's ends
+        after += [-new.start, new.end - 0.5]
+    assert min(before) > 0.006
+    assert max(after) < 0.001
+    assert -np.mean(after) < 0.0045 and min(after) > -0.0075
+
+
+def test_a_solid_band_ignores_the_strokes_width():
+    # On solid paint the band's own profile is the stroke's: a width from the edges (even a
+    # narrower one) changes nothing.
+    pts = painted_stroke(LINE, NORMALS, caps=True, seed=1)
+    assert ends_on_line(pts, band_half_width=0.0115) == ends_on_line(pts)
+
+
 def test_isotropic_noise_is_not_a_band():
     # Points scattered around a curve have no band edge to read a cap from: kept as they are.
     pts, ref = noisy_arc(seed=3)

@@ -56,7 +56,12 @@ back to where the full-width band stops:
    stroke's half width h: a wire patch or two tell the local one poorly): the last E
    that keeps the points inside the band and cap (a wire across the cap, narrowed to the
    cap's chord, places E; a full-width wire says the line goes at least that far). An end
-   whose cap falls in a gap cannot be seen: the curve ends on the last wire.
+   whose cap falls in a gap cannot be seen: the curve ends on the last wire. When the stroke's
+   half width is known from its edges (``band_half_width``: ``fitting.stroke``) and the
+   paint's profile is much narrower (under ``_FILLED`` of it: on a mesh whose wires run
+   along the line the paint's profile is the wires', 4 mm on the simulator's basket against
+   10 mm from the edges), the paint does not fill its band: both ends are the envelope's, with
+   the edges' half width, over the last ``_WINDOW`` of them within the extent.
 6. **Limits.** An end never moves beyond the paint's extent, and each end moves in by at most
    ``MAX_TRIM_SHARE`` of the extent, so a stroke shorter than its own width keeps at least half
    of its length.
@@ -156,6 +161,10 @@ _GAP_M = 0.004
 _EXTENT_QUANTILE = 0.002
 #: Share of the largest end bounds of gapped paint left out.
 _ENVELOPE_SHARE = 0.05
+#: Paint whose profile's half width is under this share of the stroke's (from its edges) does
+#: not fill its band (a wire mesh: the paint on the wires along the line makes its profile);
+#: a solid stroke's reads 1.0-1.15 of it.
+_FILLED = 0.75
 
 
 @dataclass(frozen=True)
@@ -254,6 +263,7 @@ def stroke_ends(
     mode: str = "auto",
     trim_m: float | None = None,
     span: float = 0.01,
+    band_half_width: float | None = None,
 ) -> StrokeEnds:
     """Where the painted line starts and ends along an ordered polyline (see the module text).
 
@@ -277,6 +287,10 @@ def stroke_ends(
         Move each end in by exactly this much instead of estimating it (metres).
     span : float
         Chord length of the end directions the polyline is extended along, metres.
+    band_half_width : float, optional
+        The stroke's half width measured from its edges (``fitting.stroke``), metres: when the
+        paint's own profile is much narrower (under ``_FILLED`` of it: the paint does not
+        fill its band), both ends are read off the envelope with this width (step 5).
     """
     extended = extended_polyline(polyline, reach=_REACH, span=span)
     dist, arc = arc_positions(extended, points)
@@ -294,6 +308,11 @@ def stroke_ends(
     if mode == "none" or profile is None:
         return StrokeEnds(lo, hi, half, (0.0, 0.0), ("none", "none"))
     half = profile.half_width
+    if band_half_width is not None and half < _FILLED * band_half_width:
+        # Paint on a mesh's wires: its profile is the wires', not the stroke's.
+        return _envelope_ends(
+            extended, arc[near], points[near], pos[near], (lo, hi), band_half_width
+        )
     if not _is_band(dist[near], pos[near], lo, hi, half):
         # Isotropic noise around a curve, or paint on wires running along it: no band edge
         # to read a cap from.
@@ -335,6 +354,41 @@ def stroke_ends(
     trim0 = float(np.clip(-e0 - lo, 0.0, limit))
     trim1 = float(np.clip(hi - e1, 0.0, limit))
     return StrokeEnds(lo + trim0, hi - trim1, half, (trim0, trim1), (shape0, shape1))
+
+
+def _envelope_ends(
+    extended: FloatArray,
+    arc: FloatArray,
+    points: FloatArray,
+    pos: FloatArray,
+    extent: tuple[float, float],
+    half: float,
+) -> StrokeEnds:
+    """Both ends of paint that does not fill its band (step 5 with the stroke's half width
+    ``half`` from its edges): the envelope of the points (N, 3) within ``_WINDOW`` half
+    widths of each end of the ``extent`` (their positions ``pos`` (N,) along the line, arc
+    lengths ``arc`` (N,) along the ``extended`` polyline), within the band's plane."""
+    lo, hi = extent
+    limit = MAX_TRIM_SHARE * max(hi - lo, 0.0)
+    middle = 0.5 * (lo + hi)
+    ends, shapes = [], []
+    for sign, paint_tip in ((-1.0, -lo), (1.0, hi)):
+        p = sign * pos
+        window = np.flatnonzero(p >= max(paint_tip - _WINDOW * half, sign * middle))
+        lateral, off_plane = _in_band_plane(points[window], extended, arc[window])
+        keep = (off_plane <= _OFF_PLANE * half) & (lateral <= half) & (p[window] <= paint_tip)
+        if keep.sum() < _MIN_END_POINTS:  # too little paint at this end to tell: kept
+            ends.append(paint_tip)
+            shapes.append("none")
+            continue
+        # Only points within the extent (its quantile left the stray ones out): the sparse
+        # paint at a mesh's tip is the end's evidence, not noise.
+        bound = _envelope_end(p[window[keep]], lateral[keep], band_half=half, share=0.0)
+        ends.append(min(bound, paint_tip))
+        shapes.append("gapped")
+    trim0 = float(np.clip(-ends[0] - lo, 0.0, limit))
+    trim1 = float(np.clip(hi - ends[1], 0.0, limit))
+    return StrokeEnds(lo + trim0, hi - trim1, half, (trim0, trim1), (shapes[0], shapes[1]))
 
 
 def band_profile(dist: FloatArray, pos: FloatArray, lo: float, hi: float) -> EdgeProfile | None:
@@ -545,18 +599,20 @@ def _gapped(p: FloatArray, *, start: float, tip: float, half: float) -> bool:
     return bool(np.any(run & opens))
 
 
-def _envelope_end(p: FloatArray, d: FloatArray, *, band_half: float) -> float:
+def _envelope_end(
+    p: FloatArray, d: FloatArray, *, band_half: float, share: float = _ENVELOPE_SHARE
+) -> float:
     """The end of gapped paint (a basket's wires): the last position E that keeps the paint
     inside the stroke (band up to E, a cap of radius ``band_half`` beyond).
 
     With a wire patch or two in the window, a density model has too little to go on, but the
     envelope does: a point at (x, d) needs E >= x - sqrt(h^2 - d^2), so a full-width wire
     says the line reaches at least that far, and a wire across the cap, narrowed to the cap's
-    chord, places E. The largest ``_ENVELOPE_SHARE`` of these bounds are left out (noise and
-    stray points).
+    chord, places E. The largest ``share`` of these bounds are left out (noise and stray
+    points), and at least the largest.
     """
     bound = np.sort(p - np.sqrt(np.maximum(band_half**2 - d**2, 0.0)))
-    k = max(int(np.ceil(_ENVELOPE_SHARE * len(bound))), 2)
+    k = max(int(np.ceil(share * len(bound))), 2)
     return float(bound[-min(k, len(bound))])
 
 

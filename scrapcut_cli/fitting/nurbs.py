@@ -214,7 +214,9 @@ def fit_nurbs(
     corners = 0
     if settings.corner_angle_deg > 0.0 and solid:
         fit, corners = _insert_corners(x, fit, settings)
-    fit, ends = _to_data_extent(x_all, fit, settings)
+    fit, ends = _to_data_extent(
+        x_all, fit, settings, band_half_width=None if stroke is None else stroke.edge_half_width
+    )
 
     dist = np.linalg.norm(fit.residuals, axis=1)
     model = NurbsModel(
@@ -676,11 +678,14 @@ def _kink_angles(fit: _Fit) -> FloatArray:
 # --------------------------------------------------------------------------- ends
 
 
-def _to_data_extent(x: FloatArray, fit: _Fit, config: NurbsConfig) -> tuple[_Fit, StrokeEnds]:
+def _to_data_extent(
+    x: FloatArray, fit: _Fit, config: NurbsConfig, *, band_half_width: float | None = None
+) -> tuple[_Fit, StrokeEnds]:
     """Trim or extend the curve to where the points ``x`` (all of them) begin and end along it,
-    each end then moved in to its round cap's centre (``end_trim``); exactly: the end spans'
-    polynomials are continued, then re-expressed on clamped knots over [0, 1]. The state
-    returned is evaluated on ``x``."""
+    each end then moved in to its round cap's centre (``end_trim``; ``band_half_width``: the
+    stroke's from its edges, see ``ends.stroke_ends``); exactly: the end spans' polynomials
+    are continued, then re-expressed on clamped knots over [0, 1]. The state returned is
+    evaluated on ``x``."""
     spline = fit.spline()
     ts = np.linspace(0.0, 1.0, max(int(fit.length / 0.0005), 200))
     dense = spline(ts)
@@ -695,6 +700,7 @@ def _to_data_extent(x: FloatArray, fit: _Fit, config: NurbsConfig) -> tuple[_Fit
         radius=radius,
         mode=config.end_trim,
         trim_m=config.end_trim_m,
+        band_half_width=band_half_width,
     )
     speed0 = float(np.linalg.norm(spline(0.0, 1)))
     speed1 = float(np.linalg.norm(spline(1.0, 1)))

@@ -271,6 +271,7 @@ def fit_skeleton(
         mode=config.end_trim,
         trim_m=config.end_trim_m,
         span=window,
+        band_half_width=None if stroke is None else stroke.edge_half_width,
     )
     centre = clip_to_extent(centre, ends.start, ends.end, span=window)
     polyline = resample_polyline(centre, config.sample_spacing_m)

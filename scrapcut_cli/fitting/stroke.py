@@ -210,6 +210,13 @@ class StrokeModel:
     envelope_normals: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
 
     @property
+    def edge_half_width(self) -> float | None:
+        """The stroke's half width measured from its two edges (the median over the sections
+        that saw both), metres; None when no section saw both."""
+        half = float(self.info.get("half_width_m", np.nan))
+        return half if np.isfinite(half) else None
+
+    @property
     def known(self) -> NDArray[np.bool_]:
         """(K,) sections whose centre is known."""
         return np.asarray(self.kind > NONE)
@@ -816,8 +823,10 @@ def _slab_quantiles(
 
 #: A perforated stroke: under this share of a full band's paint voxels within the reach along
 #: the line (a mesh's wires or a grate's bars carry the paint, the openings between them do
-#: not). A solid stroke — on a plate, a step, a groove, a flange — fills most of its band.
-PERFORATED_SHARE = 0.5
+#: not; on two layers and smeared by stitching they hold 0.3-0.7 of it on the simulator's
+#: basket). A solid stroke — on a plate, a step, a groove, a flange — fills its band: 0.96 of
+#: it and more on the simulator's solid pieces.
+PERFORATED_SHARE = 0.8
 #: The outer surface on each side of the line: this quantile of the heights of the points
 #: there along the local normal (the outer wires' tops; a few stray points above them do not
 #: count) ...
@@ -889,7 +898,8 @@ def _envelope(
     - the points fit one plane: their RMS thickness is at most half ``MAX_LAYER_DEPTH_M`` (no
       edge of the piece, no corner within the reach);
     - the stroke is perforated: its band within the reach holds under ``PERFORATED_SHARE`` of
-      a full band's paint voxels (solid pieces — steps, flanges, grooves — are left alone);
+      a full band's paint voxels over the line's length there (solid pieces — steps, flanges,
+      grooves — are left alone);
     - both sides rise above the paint (the median height of the band's paint), by at most
       ``MAX_LAYER_DEPTH_M``; by more than a stitching voxel (a surface's own spread) here or
       at a station within the reach along the line (where the line crosses an outer wire,
@@ -910,8 +920,11 @@ def _envelope(
         return heights, model.normals.copy()
     voxel = float(model.voxel_m)
     half = max(float(np.median(model.half_width)), voxel)
-    # Paint voxels of a full band (both sides of the line) over the reach's length.
-    full = (2.0 * half / voxel) * (2.0 * reach_m / voxel)
+    s = cumulative_length(stations)
+    # Paint voxels of a full band (both sides of the line) over the line's length within the
+    # reach (near its ends the reach runs past them).
+    span = np.minimum(s + reach_m, s[-1]) - np.maximum(s - reach_m, 0.0)
+    full = (2.0 * half / voxel) * (np.maximum(span, voxel) / voxel)
     # One tree: the cloud starts with the paint, so a station's paint is the head of its
     # (ascending) cloud indices, and each station's offsets are taken once.
     near_cloud = [
@@ -931,7 +944,6 @@ def _envelope(
             planes[k] = vectors[:, 0]
             offsets[k] = d
     normals = _outward_normals(model, planes, paint, near_paint, viewpoints)
-    s = cumulative_length(stations)
     for k in np.flatnonzero(np.isfinite(normals[:, 0])).tolist():
         n = normals[k]
         # Across the line: the line's direction over the reach (a station's own tangent turns
@@ -943,7 +955,7 @@ def _envelope(
         d = offsets[k]
         pd = d[: paint_count[k]]
         band = np.abs(pd @ a) <= half
-        if band.sum() >= PERFORATED_SHARE * full or not band.any():
+        if band.sum() >= PERFORATED_SHARE * full[k] or not band.any():
             continue
         level = float(np.median(pd[band] @ n))
         h, u = d @ n, d @ a
@@ -1173,9 +1185,8 @@ def curve_confidence(
 
 
 def _curve_half_width(curve: FloatArray, paint: FloatArray, model: StrokeModel | None) -> float:
-    if model is not None and np.isfinite(model.info.get("half_width_m", np.nan)):
-        return float(model.info["half_width_m"])
-    return _paint_half_width(curve, paint)
+    half = None if model is None else model.edge_half_width
+    return _paint_half_width(curve, paint) if half is None else half
 
 
 def _height_spread(
