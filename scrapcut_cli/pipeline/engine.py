@@ -4,8 +4,8 @@
 jobs) to an :class:`Engine`:
 
 - by default a ``LocalCluster`` on this machine: one worker process per core (``workers``), one
-  thread each (the nanny sets ``OMP_NUM_THREADS=1`` and friends, so workers do not fight over
-  the cores);
+  thread each (the nanny sets ``OMP_NUM_THREADS=1`` and friends, which ``_open3d`` passes on to
+  open3d's TBB pool, so workers do not fight over the cores);
 - ``scheduler="tcp://host:8786"``: a running cluster (``dask scheduler`` and ``dask worker``
   processes, or one made by dask-jobqueue on SLURM). Workers read the recordings and write the
   outputs by the paths they are given, so they must see the same file system (absolute paths);
