@@ -46,6 +46,6 @@ def _limit_threads(open3d: ModuleType, value: str) -> None:
     """``open3d.utility.set_max_threads(int(value))`` for a positive whole number of threads
     (once per value); nothing for anything else, or where open3d has no such call."""
     setter = getattr(open3d.utility, "set_max_threads", None)
-    threads = int(value) if value.strip().isdigit() else 0
+    threads = int(value) if value.strip().isdecimal() else 0
     if setter is not None and threads > 0:
         setter(threads)
