@@ -350,6 +350,17 @@ def stroke_ends(
                 mode=mode,
             )
         )
+    return _moved_in(ends, (lo, hi), half)
+
+
+def _moved_in(
+    ends: list[tuple[float, str]], extent: tuple[float, float], half: float
+) -> StrokeEnds:
+    """The :class:`StrokeEnds` of the ends found, (position, shape) each, the start's
+    position mirrored (negated): each moved in from the ``extent`` [lo, hi] by at least 0 and at
+    most ``MAX_TRIM_SHARE`` of it (step 6)."""
+    lo, hi = extent
+    limit = MAX_TRIM_SHARE * max(hi - lo, 0.0)
     (e0, shape0), (e1, shape1) = ends
     trim0 = float(np.clip(-e0 - lo, 0.0, limit))
     trim1 = float(np.clip(hi - e1, 0.0, limit))
@@ -369,26 +380,21 @@ def _envelope_ends(
     widths of each end of the ``extent`` (their positions ``pos`` (N,) along the line, arc
     lengths ``arc`` (N,) along the ``extended`` polyline), within the band's plane."""
     lo, hi = extent
-    limit = MAX_TRIM_SHARE * max(hi - lo, 0.0)
     middle = 0.5 * (lo + hi)
-    ends, shapes = [], []
+    ends = []
     for sign, paint_tip in ((-1.0, -lo), (1.0, hi)):
         p = sign * pos
         window = np.flatnonzero(p >= max(paint_tip - _WINDOW * half, sign * middle))
         lateral, off_plane = _in_band_plane(points[window], extended, arc[window])
         keep = (off_plane <= _OFF_PLANE * half) & (lateral <= half) & (p[window] <= paint_tip)
         if keep.sum() < _MIN_END_POINTS:  # too little paint at this end to tell: kept
-            ends.append(paint_tip)
-            shapes.append("none")
+            ends.append((paint_tip, "none"))
             continue
         # Only points within the extent (its quantile left the stray ones out): the sparse
         # paint at a mesh's tip is the end's evidence, not noise.
         bound = _envelope_end(p[window[keep]], lateral[keep], band_half=half, share=0.0)
-        ends.append(min(bound, paint_tip))
-        shapes.append("gapped")
-    trim0 = float(np.clip(-ends[0] - lo, 0.0, limit))
-    trim1 = float(np.clip(hi - ends[1], 0.0, limit))
-    return StrokeEnds(lo + trim0, hi - trim1, half, (trim0, trim1), (shapes[0], shapes[1]))
+        ends.append((min(bound, paint_tip), "gapped"))
+    return _moved_in(ends, extent, half)
 
 
 def band_profile(dist: FloatArray, pos: FloatArray, lo: float, hi: float) -> EdgeProfile | None:
