@@ -10,11 +10,20 @@ Timed on one core (thread pools pinned to 1), median of ``--runs``:
 
 * ``fit`` — everything ``scrapcut fit --method nurbs`` does after start-up: read and decode
   every frame, perceive and stitch it, select the line, fit, make the cutting path; frames per
-  second of CPU time;
+  second of CPU time over the whole recording;
+* ``per frame`` — what one more frame costs, the rate a live camera would have to be met at:
+  the same sweep is recorded again with twice the frames at each view, and the difference of
+  the two fits' times (timed one after the other in each run) is divided by the difference of
+  their frame counts (the views, the stitched cloud and the fit are the same, so the fixed
+  part cancels);
+* ``fixed`` — the rest of the first recording's fit time, seconds: opening the recording, the index
+  pass, selecting the line, the fit and the cutting path; a longer recording spreads it over
+  more frames;
 * ``perception`` — the per-frame part alone on frames decoded beforehand (colour split, solid
   paint, depth gate, back-projection, downsampling, outlier removal, surface band, stitching).
 
-Goal (issue 12): fit >= 30 frames/s at 1280x720, the camera's own rate.
+Goal (issue 12): fit >= 30 frames/s at 1280x720, the camera's own rate. This virtual machine's
+speed drifts by tens of per cent within hours: only figures from back-to-back runs compare.
 
     .venv/bin/python benchmarks/bench_fit_resolution.py [--runs 5] [--frames-per-view 10]
         [--out DIR]
@@ -33,7 +42,6 @@ import statistics  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
-from typing import Any  # noqa: E402
 
 from scrapcut_cli.config import ScrapcutConfig, SimConfig  # noqa: E402
 from scrapcut_cli.perception.stitch import stitch_recording  # noqa: E402
@@ -60,6 +68,17 @@ def cpu_seconds(run: object) -> float:
     return time.process_time() - t
 
 
+def cpu_name() -> str:
+    """The CPU's model name (Linux), else what ``platform`` knows."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs", type=int, default=5)
@@ -70,30 +89,58 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     config = ScrapcutConfig()
     print(
-        f"# {platform.processor() or platform.machine()}, {os.cpu_count()} cores, one "
-        f"thread; medians of {args.runs} runs (CPU time); recordings in {out}"
+        f"# {cpu_name()}, {os.cpu_count()} cores, one thread; medians of {args.runs} runs "
+        f"(CPU time); recordings in {out}"
     )
-    print(f"{'recording':28s} {'frames':>6s} {'fit [frames/s]':>15s} {'perception':>11s}")
+    print(
+        f"{'recording':28s} {'frames':>6s} {'fit [frames/s]':>15s} {'per frame':>10s} "
+        f"{'fixed [s]':>10s} {'perception':>11s}"
+    )
     for name, (sim, file) in CASES.items():
-        path = out / file
-        if not path.exists():
-            record(SimConfig(**{**sim.__dict__, "frames_per_view": args.frames_per_view}), path)
-        with open_recording(path) as rec:
-            frames = list(rec.frames())
-            hsv, _ = paint_for_recording(rec, config)
+        paths = [recording(out, sim, file, k * args.frames_per_view) for k in (1, 2)]
+        counts = []
+        for path in paths:
+            with open_recording(path) as rec:
+                counts.append(rec.plan().usable)
+            fit(path, config)  # warm: imports, cached ray grids
+        # The two recordings alternate within each run, so that the machine's drift falls on
+        # both alike; the per-frame cost is the median of the runs' differences.
+        runs = [[cpu_seconds(lambda p=p: fit(p, config)) for p in paths] for _ in range(args.runs)]
+        fit_s = statistical_median([t[0] for t in runs])
+        per_frame_s = statistical_median([(t[1] - t[0]) / (counts[1] - counts[0]) for t in runs])
+        perceive_s = perception_seconds(paths[0], config, args.runs)
+        n = counts[0]
+        # The VM's noise can exceed a frame's cost on a short recording: no rate then.
+        rate = f"{1.0 / per_frame_s:10.1f}" if per_frame_s > 0 else f"{'n/a':>10s}"
+        print(
+            f"{name:28s} {n:6d} {n / fit_s:15.1f} {rate} {fit_s - n * per_frame_s:10.2f} "
+            f"{n / perceive_s:11.1f}",
+            flush=True,
+        )
 
-        def fit(path: Path = path) -> None:
-            stitched = stitch_recording_file(path, config=config)
-            fit_stitched(stitched, method="nurbs", config=config)
 
-        def perceive(frames: list[Any] = frames, hsv: Any = hsv) -> None:
-            stitch_recording(frames, hsv, config)
+def fit(path: Path, config: ScrapcutConfig) -> None:
+    """What ``scrapcut fit --method nurbs`` does after start-up."""
+    fit_stitched(stitch_recording_file(path, config=config), method="nurbs", config=config)
 
-        fit()  # warm: imports, cached ray grids
-        fit_s = statistical_median([cpu_seconds(fit) for _ in range(args.runs)])
-        perceive_s = statistical_median([cpu_seconds(perceive) for _ in range(args.runs)])
-        n = len(frames)
-        print(f"{name:28s} {n:6d} {n / fit_s:15.1f} {n / perceive_s:11.1f}")
+
+def recording(out: Path, sim: SimConfig, file: str, per_view: int) -> Path:
+    """The sweep recorded with ``per_view`` frames at each view (made once per ``out``)."""
+    stem, dot, ext = file.partition(".")
+    path = out / f"{stem}_{per_view}fpv{dot}{ext}"
+    if not path.exists():
+        record(SimConfig(**{**sim.__dict__, "frames_per_view": per_view}), path)
+    return path
+
+
+def perception_seconds(path: Path, config: ScrapcutConfig, runs: int) -> float:
+    """Median CPU seconds of perceiving and stitching the recording's frames, decoded first."""
+    with open_recording(path) as rec:
+        frames = list(rec.frames())
+        hsv, _ = paint_for_recording(rec, config)
+    return statistical_median(
+        [cpu_seconds(lambda: stitch_recording(frames, hsv, config)) for _ in range(runs)]
+    )
 
 
 def statistical_median(values: list[float]) -> float:
