@@ -253,6 +253,17 @@ class PerceptionConfig:
         "0 is off; spray-can strokes are 2-5 cm wide, and a 1 m wide blob fills a wrist "
         "camera's view",
     )
+    # A frame whose pixels are finer than the voxels need is read at every 2nd (4th, 8th) pixel
+    # each way, up to this many (perception.cloud.decimation): 1280x720 at the wrist's 0.3 m
+    # reads like 640x360. 1: every pixel.
+    max_decimation: int = rng(
+        8,
+        1,
+        8,
+        "",
+        "1 reads every pixel; past 8 a 1280x720 image keeps 160x90 pixels, coarser than any "
+        "voxel at the wrist",
+    )
 
 
 @dataclass(frozen=True)

@@ -81,7 +81,8 @@ def test_every_stage_option_reaches_its_config_field_in_si_units() -> None:
             value: object = not default
             expected: object = value
         elif isinstance(default, int) and not isinstance(default, bool):
-            value = expected = default + 1
+            # Away from the default, inside the range (a default may be its top).
+            value = expected = default + 1 if default + 1 <= kind.max else default - 1
         elif isinstance(default, str):
             continue  # a choice; covered by the commands' own tests
         else:  # a value inside the option's range, away from the default

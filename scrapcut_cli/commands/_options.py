@@ -311,6 +311,16 @@ _STAGE_OPTIONS: list[tuple[str, str, str, str, float, Any, str]] = [
         "Per-frame paint downsampling voxel [mm] (default 2).",
     ),
     (
+        "--max-decimation",
+        "max_decimation",
+        "perception",
+        "max_decimation",
+        1,
+        config_type("perception.max_decimation"),
+        "Read a frame at every 2nd (4th, 8th) pixel each way when its pixels are finer than "
+        "the voxels need, up to this step (default 8; 1: every pixel).",
+    ),
+    (
         "--sor-neighbors",
         "sor_neighbors",
         "perception",

@@ -2,6 +2,9 @@
 
 The recipe of one frame (:func:`process_frame`), in order:
 
+0. decimation (:func:`decimation`): a frame whose pixels are finer than the voxels need at
+   the scene's near depth is read at every 2nd (4th, 8th) pixel each way, colour and depth
+   alike, up to ``max_decimation``: what follows costs the same at 1280x720 as at 640x360;
 1. colour filter (:func:`~scrapcut_cli.perception.paint.paint_pixel_indices`); when the
    filter's pixels fall into two saturation clusters (a clear dip between modes,
    :func:`~scrapcut_cli.perception.paint.saturation_splits`: fresh paint against rust or an
@@ -41,7 +44,7 @@ from __future__ import annotations
 import functools
 import math
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -524,19 +527,56 @@ def sorted_union(a: NDArray[np.intp], b: NDArray[np.intp]) -> NDArray[np.intp]:
     return merged[np.concatenate([[True], merged[1:] != merged[:-1]])]
 
 
+#: Samples kept along a voxel's side (each way): pixels at most a third of a voxel apart leave
+#: nine or more to average in each voxel.
+SAMPLES_PER_VOXEL_SIDE = 3.0
+
+
+def _pixels_per_sample(camera: CameraModel, depth: NDArray[Any], voxel_m: float) -> float:
+    """How many pixels apart samples may be, at the near depth (10 % quantile) of the valid
+    ``depth`` values, for :data:`SAMPLES_PER_VOXEL_SIDE` samples a voxel side; 1 when none is
+    valid."""
+    z = depth[np.isfinite(depth) & (depth > 0)]
+    if z.size == 0:
+        return 1.0
+    focal = min(camera.fx, camera.fy)
+    return voxel_m * focal / (SAMPLES_PER_VOXEL_SIDE * float(np.quantile(z, 0.1)))
+
+
 def sampling_stride(frame: Frame, pixels: NDArray[np.intp], voxel_m: float) -> int:
     """Every how many pixels (each way) the paint is back-projected: as many as keep samples
     at most a third of a voxel apart at the paint's near depth (its 10 % quantile), so each
-    voxel still averages nine or more. At 640x480 and 0.3 m every pixel (0.5 mm), at 1280x720
-    every other one (0.3 mm): the work after the mask no longer grows with the resolution."""
+    voxel still averages nine or more. After :func:`decimation` a frame's paint is sampled at
+    every pixel but in a frame nearer than the rest of the scene: the work after the mask no
+    longer grows with the resolution."""
     if pixels.size == 0:
         return 1
     z = np.take(frame.depth.reshape(-1), pixels[:: max(1, pixels.size // 256)])
-    z = z[np.isfinite(z) & (z > 0)]
-    if z.size == 0:
+    return max(1, int(_pixels_per_sample(frame.camera, z, voxel_m)))
+
+
+def decimation(
+    depth: NDArray[np.float32], camera: CameraModel, voxel_m: float, max_step: int
+) -> int:
+    """Every how many pixels (each way: 1, 2, 4 or 8, at most ``max_step``) a frame with this
+    ``depth`` image (H, W) is read (:meth:`Frame.decimated`): the most that keep its pixels a
+    third of a voxel apart or closer at the scene's near depth, the 10 % quantile of the valid
+    depth (on a sample); the paint lies on the scanned piece, the near part of the scene.
+
+    Every per-pixel step (the colour filter, the pixel tests, the blobs, the edges) then costs
+    what it does at the resolution the voxels need, not the camera's: 1280x720 at the wrist's
+    0.3 m reads like 640x360 (0.65 mm pixels against 2 mm voxels), and 640x480 like itself
+    until nearer than 0.2 m. The pixel rules (``min_paint_neighbors``, the flying-pixel test)
+    then see pixels of about the size they were chosen for."""
+    if max_step < 2:
         return 1
-    focal = min(frame.camera.fx, frame.camera.fy)
-    return max(1, int(voxel_m * focal / (3.0 * float(np.quantile(z, 0.1)))))
+    flat = depth.reshape(-1)
+    sample = flat[:: max(1, flat.size // 4096)]
+    limit = min(_pixels_per_sample(camera, sample, voxel_m), float(max_step))
+    step = 1
+    while 2 * step <= limit:
+        step *= 2
+    return step
 
 
 def _solid_paint(
@@ -784,6 +824,20 @@ def process_frame(frame: Frame, hsv: HsvRange, config: PerceptionConfig) -> Fram
         Empty clouds and a ``skip_reason`` when the frame shows no usable paint.
     """
     check_perception_config(config)
+    if "decimation" not in frame.extras:  # not decimated already (Frame.decimated)
+        frame = frame.decimated(
+            decimation(frame.depth, frame.camera, config.voxel_size_m, config.max_decimation)
+        )
+    clouds = _process_frame(frame, hsv, config)
+    step = int(frame.extras.get("decimation", 1))  # type: ignore[call-overload]
+    if step == 1:
+        return clouds
+    # The filter's count in the image's own pixels, whatever the step it was read at (the
+    # back-projected count is of samples: a fine frame's paint was sampled at a stride before).
+    return replace(clouds, paint_pixels=clouds.paint_pixels * step * step)
+
+
+def _process_frame(frame: Frame, hsv: HsvRange, config: PerceptionConfig) -> FrameClouds:
     T = np.asarray(frame.T_base_cam, dtype=np.float64)
     empty = np.zeros((0, 3))
     centre = view_centre(frame)

@@ -149,6 +149,24 @@ class CameraModel:
             frame_id=self.frame_id,
         )
 
+    def decimated(self, step: int) -> CameraModel:
+        """The camera of every ``step``-th pixel each way (rows and columns 0, step, ...):
+        pixel (u, v) of it is pixel (step·u, step·v) of this one, so the principal point and
+        focal lengths divide by ``step`` exactly (not :meth:`scaled`'s area mapping)."""
+        if step == 1:
+            return self
+        return CameraModel(
+            width=-(-self.width // step),
+            height=-(-self.height // step),
+            fx=self.fx / step,
+            fy=self.fy / step,
+            cx=self.cx / step,
+            cy=self.cy / step,
+            distortion_model=self.distortion_model,
+            distortion=self.distortion,
+            frame_id=self.frame_id,
+        )
+
 
 @functools.lru_cache(maxsize=8)
 def _ray_grid(camera: CameraModel) -> NDArray[np.float32]:
@@ -204,6 +222,24 @@ class Frame:
             )
         if np.asarray(self.T_base_cam).shape != (4, 4):
             raise ValueError("T_base_cam must be a (4, 4) matrix")
+
+    def decimated(self, step: int) -> Frame:
+        """This frame's every ``step``-th pixel each way, colour and depth alike (rows and
+        columns 0, step, ...: a depth is never averaged across an edge into a flying pixel),
+        with :meth:`CameraModel.decimated`; ``extras["decimation"]`` says by how much."""
+        if step == 1:
+            return self
+        return Frame(
+            index=self.index,
+            stamp_ns=self.stamp_ns,
+            color=np.ascontiguousarray(self.color[::step, ::step]),
+            depth=np.ascontiguousarray(self.depth[::step, ::step]),
+            camera=self.camera.decimated(step),
+            T_base_cam=self.T_base_cam,
+            base_frame=self.base_frame,
+            camera_frame=self.camera_frame,
+            extras={**self.extras, "decimation": step},
+        )
 
     @property
     def camera_position(self) -> NDArray[np.float64]:
