@@ -101,7 +101,7 @@ def flat_frame(camera: CameraModel, depth_m: float) -> Frame:
         # A step that is not a power of two is rounded down to one; 1 reads every pixel.
         ((1280, 720), 0.14, 3, 2),
         ((1280, 720), 0.14, 1, 1),
-        # 640x480 (focal 460) at 0.25 m: 0.54 mm pixels, kept; nearer than 0.15 m, halved.
+        # 640x360 (focal 460) at 0.25 m: 0.54 mm pixels, kept; at 0.14 m (0.30 mm), halved.
         ((640, 360), 0.25, 8, 1),
         ((640, 360), 0.14, 8, 2),
     ],

@@ -546,9 +546,9 @@ def _pixels_per_sample(camera: CameraModel, depth: NDArray[Any], voxel_m: float)
 def sampling_stride(frame: Frame, pixels: NDArray[np.intp], voxel_m: float) -> int:
     """Every how many pixels (each way) the paint is back-projected: as many as keep samples
     at most a third of a voxel apart at the paint's near depth (its 10 % quantile), so each
-    voxel still averages nine or more. After :func:`decimation` a frame's paint is sampled at
-    every pixel but in a frame nearer than the rest of the scene: the work after the mask no
-    longer grows with the resolution."""
+    voxel still averages nine or more. After :func:`decimation` this is 1 unless the paint is
+    nearer than the near part of the scene: the work after the mask no longer grows with the
+    resolution."""
     if pixels.size == 0:
         return 1
     z = np.take(frame.depth.reshape(-1), pixels[:: max(1, pixels.size // 256)])
@@ -824,12 +824,8 @@ def process_frame(frame: Frame, hsv: HsvRange, config: PerceptionConfig) -> Fram
         Empty clouds and a ``skip_reason`` when the frame shows no usable paint.
     """
     check_perception_config(config)
-    if "decimation" not in frame.extras:  # not decimated already (Frame.decimated)
-        frame = frame.decimated(
-            decimation(frame.depth, frame.camera, config.voxel_size_m, config.max_decimation)
-        )
-    clouds = _process_frame(frame, hsv, config)
-    step = int(frame.extras.get("decimation", 1))  # type: ignore[call-overload]
+    step = decimation(frame.depth, frame.camera, config.voxel_size_m, config.max_decimation)
+    clouds = _process_frame(frame.decimated(step), hsv, config)
     if step == 1:
         return clouds
     # The filter's count in the image's own pixels, whatever the step it was read at (the
