@@ -4,7 +4,8 @@ Two simulated sweeps of the cylinder (d435i noise, 9 views, ``--frames-per-view`
 30 Hz at each view, as a camera streaming while the arm rests):
 
 * 640x480, raw rgb8 colour, MCAP;
-* 1280x720, colour JPEG-compressed only (quality 95), a ROS 2 bag with sqlite3 storage.
+* 1280x720, colour JPEG-compressed only (quality 95), a ROS 2 bag with sqlite3 storage;
+  again with ``--max-decimation 8`` (read like 640x360 at the wrist's 0.3 m).
 
 Timed on one core (thread pools pinned to 1), median of ``--runs``:
 
@@ -16,9 +17,9 @@ Timed on one core (thread pools pinned to 1), median of ``--runs``:
   the two fits' times (timed one after the other in each run) is divided by the difference of
   their frame counts (the views, the stitched cloud and the fit are the same, so the fixed
   part cancels);
-* ``fixed`` — the rest of the first recording's fit time, seconds: opening the recording, the index
-  pass, selecting the line, the fit and the cutting path; a longer recording spreads it over
-  more frames;
+* ``fixed`` — the rest of the first recording's fit time, seconds: opening the recording,
+  the index pass, selecting the line, the fit and the cutting path; a longer recording
+  spreads it over more frames;
 * ``perception`` — the per-frame part alone on frames decoded beforehand (colour split, solid
   paint, depth gate, back-projection, downsampling, outlier removal, surface band, stitching).
 
@@ -53,11 +54,18 @@ from scrapcut_cli.pipeline.fit import (  # noqa: E402
 from scrapcut_cli.recording.reader import open_recording  # noqa: E402
 from scrapcut_cli.sim import record  # noqa: E402
 
+#: (the sweep's simulator settings, its file name, perception.max_decimation)
 CASES = {
-    "640x480 rgb8 MCAP": (SimConfig(width=640, height=480), "cylinder_640.mcap"),
+    "640x480 rgb8 MCAP": (SimConfig(width=640, height=480), "cylinder_640.mcap", 1),
     "1280x720 JPEG ROS2 sqlite3": (
         SimConfig(width=1280, height=720, color_encoding="jpeg"),
         "cylinder_1280_jpeg",
+        1,
+    ),
+    "  --max-decimation 8": (
+        SimConfig(width=1280, height=720, color_encoding="jpeg"),
+        "cylinder_1280_jpeg",
+        8,
     ),
 }
 
@@ -87,7 +95,6 @@ def main() -> None:
     args = parser.parse_args()
     out = args.out or Path(tempfile.mkdtemp(prefix="bench_fit_resolution_"))
     out.mkdir(parents=True, exist_ok=True)
-    config = ScrapcutConfig()
     print(
         f"# {cpu_name()}, {os.cpu_count()} cores, one thread; medians of {args.runs} runs "
         f"(CPU time); recordings in {out}"
@@ -96,7 +103,8 @@ def main() -> None:
         f"{'recording':28s} {'frames':>6s} {'fit [frames/s]':>15s} {'per frame':>10s} "
         f"{'fixed [s]':>10s} {'perception':>11s}"
     )
-    for name, (sim, file) in CASES.items():
+    for name, (sim, file, max_decimation) in CASES.items():
+        config = ScrapcutConfig().override("perception", max_decimation=max_decimation)
         paths = [recording(out, sim, file, k * args.frames_per_view) for k in (1, 2)]
         counts = []
         for path in paths:
@@ -105,7 +113,9 @@ def main() -> None:
             fit(path, config)  # warm: imports, cached ray grids
         # The two recordings alternate within each run, so that the machine's drift falls on
         # both alike; the per-frame cost is the median of the runs' differences.
-        runs = [[cpu_seconds(lambda p=p: fit(p, config)) for p in paths] for _ in range(args.runs)]
+        runs = [
+            [cpu_seconds(lambda p=p, c=config: fit(p, c)) for p in paths] for _ in range(args.runs)
+        ]
         fit_s = statistical_median([t[0] for t in runs])
         per_frame_s = statistical_median([(t[1] - t[0]) / (counts[1] - counts[0]) for t in runs])
         perceive_s = perception_seconds(paths[0], config, args.runs)

@@ -253,11 +253,12 @@ class PerceptionConfig:
         "0 is off; spray-can strokes are 2-5 cm wide, and a 1 m wide blob fills a wrist "
         "camera's view",
     )
-    # A frame whose pixels are finer than the voxels need is read at every 2nd (4th, 8th) pixel
-    # each way, up to this many (perception.cloud.decimation): 1280x720 at the wrist's 0.3 m
-    # reads like 640x360. 1: every pixel.
+    # Up to this step, a frame whose pixels are finer than the voxels need is read at every
+    # 2nd (4th, 8th) pixel each way (perception.cloud.decimation): 1280x720 at the wrist's
+    # 0.3 m reads like 640x360, in about two thirds of the time. Off (1) by default: thin
+    # painted wires (a basket's, seen from under 0.2 m) lose too much of their paint.
     max_decimation: int = rng(
-        8,
+        1,
         1,
         8,
         "",

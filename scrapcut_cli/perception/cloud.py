@@ -2,9 +2,10 @@
 
 The recipe of one frame (:func:`process_frame`), in order:
 
-0. decimation (:func:`decimation`): a frame whose pixels are finer than the voxels need at
-   the scene's near depth is read at every 2nd (4th, 8th) pixel each way, colour and depth
-   alike, up to ``max_decimation``: what follows costs the same at 1280x720 as at 640x360;
+0. decimation (:func:`decimation`), when ``max_decimation`` allows it (off by default): a
+   frame whose pixels are finer than the voxels need at the scene's near depth is read at
+   every 2nd (4th, 8th) pixel each way, colour and depth alike: what follows costs the same
+   at 1280x720 as at 640x360;
 1. colour filter (:func:`~scrapcut_cli.perception.paint.paint_pixel_indices`); when the
    filter's pixels fall into two saturation clusters (a clear dip between modes,
    :func:`~scrapcut_cli.perception.paint.saturation_splits`: fresh paint against rust or an
@@ -546,9 +547,9 @@ def _pixels_per_sample(camera: CameraModel, depth: NDArray[Any], voxel_m: float)
 def sampling_stride(frame: Frame, pixels: NDArray[np.intp], voxel_m: float) -> int:
     """Every how many pixels (each way) the paint is back-projected: as many as keep samples
     at most a third of a voxel apart at the paint's near depth (its 10 % quantile), so each
-    voxel still averages nine or more. After :func:`decimation` this is 1 unless the paint is
-    nearer than the near part of the scene: the work after the mask no longer grows with the
-    resolution."""
+    voxel still averages nine or more. At 640x480 and 0.3 m every pixel (0.5 mm), at 1280x720
+    every other one (0.3 mm): the work after the mask no longer grows with the resolution
+    (after :func:`decimation`, the work before it neither)."""
     if pixels.size == 0:
         return 1
     z = np.take(frame.depth.reshape(-1), pixels[:: max(1, pixels.size // 256)])
@@ -567,7 +568,9 @@ def decimation(
     what it does at the resolution the voxels need, not the camera's: 1280x720 at the wrist's
     0.3 m reads like 640x360 (0.65 mm pixels against 2 mm voxels), and 640x480 like itself
     until nearer than 0.2 m. The pixel rules (``min_paint_neighbors``, the flying-pixel test)
-    then see pixels of about the size they were chosen for."""
+    then see pixels of about the size they were chosen for; but a band a pixel wide at a depth
+    edge is twice as wide in metres, and thin painted wires (a basket's) lose much of their
+    paint: ``max_decimation`` is 1 (off) by default."""
     if max_step < 2:
         return 1
     flat = depth.reshape(-1)
