@@ -21,7 +21,11 @@ Timed on one core (thread pools pinned to 1), median of ``--runs``:
   the index pass, selecting the line, the fit and the cutting path; a longer recording
   spreads it over more frames;
 * ``perception`` — the per-frame part alone on frames decoded beforehand (colour split, solid
-  paint, depth gate, back-projection, downsampling, outlier removal, surface band, stitching).
+  paint, depth gate, back-projection, downsampling, outlier removal, surface band, stitching),
+  frames per second.
+
+Each run times every case in turn (the cases' medians compare: the machine's drift falls on
+all alike).
 
 Goal (issue 12): fit >= 30 frames/s at 1280x720, the camera's own rate. This virtual machine's
 speed drifts by tens of per cent within hours: only figures from back-to-back runs compare.
@@ -43,6 +47,7 @@ import statistics  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
 
 from scrapcut_cli.config import ScrapcutConfig, SimConfig  # noqa: E402
 from scrapcut_cli.perception.stitch import stitch_recording  # noqa: E402
@@ -103,6 +108,7 @@ def main() -> None:
         f"{'recording':28s} {'frames':>6s} {'fit [frames/s]':>15s} {'per frame':>10s} "
         f"{'fixed [s]':>10s} {'perception':>11s}"
     )
+    cases = []
     for name, (sim, file, max_decimation) in CASES.items():
         config = ScrapcutConfig().override("perception", max_decimation=max_decimation)
         paths = [recording(out, sim, file, k * args.frames_per_view) for k in (1, 2)]
@@ -111,20 +117,27 @@ def main() -> None:
             with open_recording(path) as rec:
                 counts.append(rec.plan().usable)
             fit(path, config)  # warm: imports, cached ray grids
-        # The two recordings alternate within each run, so that the machine's drift falls on
-        # both alike; the per-frame cost is the median of the runs' differences.
-        runs = [
-            [cpu_seconds(lambda p=p, c=config: fit(p, c)) for p in paths] for _ in range(args.runs)
-        ]
+        cases.append((name, config, paths, counts, decoded(paths[0])))
+    # Every case's recordings are timed one after the other in each run, so that the
+    # machine's drift falls on all alike; the per-frame cost is the median of the runs'
+    # differences between a case's two recordings.
+    times: list[list[list[float]]] = [[] for _ in cases]
+    perception: list[list[float]] = [[] for _ in cases]
+    for _ in range(args.runs):
+        for k, (_, config, paths, _, (frames, hsv)) in enumerate(cases):
+            times[k].append([cpu_seconds(lambda p=p, c=config: fit(p, c)) for p in paths])
+            perception[k].append(
+                cpu_seconds(lambda f=frames, h=hsv, c=config: stitch_recording(f, h, c))
+            )
+    for (name, _, _, counts, _), runs, perceive in zip(cases, times, perception, strict=True):
         fit_s = statistical_median([t[0] for t in runs])
         per_frame_s = statistical_median([(t[1] - t[0]) / (counts[1] - counts[0]) for t in runs])
-        perceive_s = perception_seconds(paths[0], config, args.runs)
         n = counts[0]
         # The VM's noise can exceed a frame's cost on a short recording: no rate then.
         rate = f"{1.0 / per_frame_s:10.1f}" if per_frame_s > 0 else f"{'n/a':>10s}"
         print(
             f"{name:28s} {n:6d} {n / fit_s:15.1f} {rate} {fit_s - n * per_frame_s:10.2f} "
-            f"{n / perceive_s:11.1f}",
+            f"{n / statistical_median(perceive):11.1f}",
             flush=True,
         )
 
@@ -143,14 +156,11 @@ def recording(out: Path, sim: SimConfig, file: str, per_view: int) -> Path:
     return path
 
 
-def perception_seconds(path: Path, config: ScrapcutConfig, runs: int) -> float:
-    """Median CPU seconds of perceiving and stitching the recording's frames, decoded first."""
+def decoded(path: Path) -> tuple[list[Any], Any]:
+    """The recording's frames, decoded, and its paint: what perception is timed on."""
+    config = ScrapcutConfig()
     with open_recording(path) as rec:
-        frames = list(rec.frames())
-        hsv, _ = paint_for_recording(rec, config)
-    return statistical_median(
-        [cpu_seconds(lambda: stitch_recording(frames, hsv, config)) for _ in range(runs)]
-    )
+        return list(rec.frames()), paint_for_recording(rec, config)[0]
 
 
 def statistical_median(values: list[float]) -> float:
