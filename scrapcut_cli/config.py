@@ -255,8 +255,8 @@ class PerceptionConfig:
     )
     # Up to this step, a frame whose pixels are finer than the voxels need is read at every
     # 2nd (4th, 8th) pixel each way (perception.cloud.decimation): 1280x720 at the wrist's
-    # 0.3 m reads like 640x360, in about two thirds of the time. Off (1) by default: thin
-    # painted wires (a basket's, seen from under 0.2 m) lose too much of their paint.
+    # 0.3 m reads like 640x360, its perception in about three quarters of the time. Off (1)
+    # by default: thin painted wires (a basket's, seen from under 0.2 m) lose their paint.
     max_decimation: int = rng(
         1,
         1,
