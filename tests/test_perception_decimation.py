@@ -20,7 +20,7 @@ from scipy.spatial import cKDTree
 from scrapcut_cli.config import PerceptionConfig, ScrapcutConfig
 from scrapcut_cli.errors import ConfigError
 from scrapcut_cli.geometry import PolylineDistance
-from scrapcut_cli.perception.cloud import decimation, process_frame
+from scrapcut_cli.perception.cloud import _usable, decimation, process_frame
 from scrapcut_cli.perception.paint import PAINT_PRESETS
 from scrapcut_cli.recording.frame import CameraModel, Frame
 
@@ -73,9 +73,39 @@ def test_a_decimated_frame_keeps_every_steps_pixel_of_colour_and_depth() -> None
     assert coarse.color.shape == (19, 26, 3) and coarse.depth.shape == (19, 26)
     np.testing.assert_array_equal(coarse.color, frame.color[::4, ::4])
     np.testing.assert_array_equal(coarse.depth, frame.depth[::4, ::4])
-    assert coarse.extras == {"depth_stamp_ns": 8, "decimation": 4}
+    assert coarse.extras["decimation"] == 4 and coarse.extras["depth_stamp_ns"] == 8
+    assert coarse.extras["full_depth"] is frame.depth
     assert (coarse.index, coarse.stamp_ns, coarse.camera) == (4, 7, camera.decimated(4))
     assert frame.decimated(1) is frame  # a frame read at its own resolution is itself
+
+
+def test_a_decimated_frames_depth_gate_looks_one_camera_pixel_away() -> None:
+    # A wire 8 px wide at 0.2 m before a wall at 0.6 m, a flying pixel at each rim: every
+    # pixel's gate drops the wire's two rim pixels; read at every other pixel, the gate still
+    # compares each sample with its neighbours one camera pixel away, not two.
+    depth = np.full((40, 240), 0.6, dtype=np.float32)
+    depth[:, 100:108] = 0.2
+    depth[:, [99, 108]] = 0.4
+    camera = CameraModel(240, 40, 300.0, 300.0, 120.0, 20.0)
+    colour = np.zeros((40, 240, 3), dtype=np.uint8)
+    frame = Frame(
+        index=0, stamp_ns=0, color=colour, depth=depth, camera=camera, T_base_cam=np.eye(4)
+    )
+    full = usable_depth(frame, np.flatnonzero(depth.reshape(-1) < 0.3))
+    assert set(np.unique(full % 240)) == set(range(101, 107))
+    half = frame.decimated(2)
+    kept = usable_depth(half, np.flatnonzero(half.depth.reshape(-1) < 0.3))
+    # The samples at columns 102, 104, 106 of the camera: as the full frame's gate says.
+    assert set(np.unique(kept % 120)) == {51, 52, 53}
+    # Without the full frame's depth the rims grow to two camera pixels: 106 goes too.
+    plain = replace(half, extras={})
+    narrow = usable_depth(plain, np.flatnonzero(half.depth.reshape(-1) < 0.3))
+    assert set(np.unique(narrow % 120)) == {51, 52}
+
+
+def usable_depth(frame: Frame, pixels: np.ndarray) -> np.ndarray:
+    """The depth gate perception applies to a frame's pixels (the default configuration's)."""
+    return _usable(frame, pixels.astype(np.intp), CONFIG)
 
 
 def flat_frame(camera: CameraModel, depth_m: float) -> Frame:

@@ -489,14 +489,25 @@ def _grid_mask(height: int, width: int, stride: int) -> NDArray[np.bool_]:
 
 
 def _usable(frame: Frame, pixels: NDArray[np.intp], config: PerceptionConfig) -> NDArray[np.intp]:
-    """:func:`usable_depth_pixels` with the configuration's depth gate."""
-    return usable_depth_pixels(
-        frame.depth,
-        pixels,
-        min_depth_m=config.min_depth_m,
-        max_depth_m=config.max_depth_m,
-        flying_pixel_ratio=config.flying_pixel_ratio,
-    )
+    """:func:`usable_depth_pixels` with the configuration's depth gate.
+
+    In a decimated frame (:meth:`Frame.decimated`) each pixel is tested against its
+    neighbours in the full-resolution depth: the flying pixels at a depth edge stay a band
+    one camera pixel wide, where the decimated image's neighbours (``step`` pixels away) would
+    widen it ``step`` times, enough to strip a thin wire seen from close up of its paint."""
+    gate = {
+        "min_depth_m": config.min_depth_m,
+        "max_depth_m": config.max_depth_m,
+        "flying_pixel_ratio": config.flying_pixel_ratio,
+    }
+    full, step = frame.extras.get("full_depth"), frame.extras.get("decimation")
+    if not isinstance(full, np.ndarray) or not isinstance(step, int) or step < 2:
+        return usable_depth_pixels(frame.depth, pixels, **gate)
+    width, full_width = frame.depth.shape[1], full.shape[1]
+    v, u = np.divmod(pixels, width)
+    kept = usable_depth_pixels(full, v * (step * full_width) + u * step, **gate)
+    kv, ku = np.divmod(kept, full_width)
+    return np.asarray((kv // step) * width + ku // step, dtype=np.intp)
 
 
 def boundary_pixels(pixels: NDArray[np.intp], shape: tuple[int, ...]) -> NDArray[np.intp]:
@@ -567,10 +578,11 @@ def decimation(
     Every per-pixel step (the colour filter, the pixel tests, the blobs, the edges) then costs
     what it does at the resolution the voxels need, not the camera's: 1280x720 at the wrist's
     0.3 m reads like 640x360 (0.65 mm pixels against 2 mm voxels), and 640x480 like itself
-    until nearer than 0.2 m. The pixel rules (``min_paint_neighbors``, the flying-pixel test)
-    then see pixels of about the size they were chosen for; but a band a pixel wide at a depth
-    edge is twice as wide in metres, and thin painted wires (a basket's) lose much of their
-    paint: ``max_decimation`` is 1 (off) by default."""
+    until nearer than 0.2 m. The depth gate still compares a sample with its neighbours one
+    camera pixel away (``_usable``): its flying-pixel band at a depth edge would otherwise be
+    ``step`` times as wide in metres and strip a thin wire seen from close up of its paint.
+    ``max_decimation`` is 1 (off) by default: on a basket's wires the exploration's fits still
+    read a little worse with it (``benchmarks/scenes.md``)."""
     if max_step < 2:
         return 1
     flat = depth.reshape(-1)

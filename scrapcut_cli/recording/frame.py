@@ -226,7 +226,9 @@ class Frame:
     def decimated(self, step: int) -> Frame:
         """This frame's every ``step``-th pixel each way, colour and depth alike (rows and
         columns 0, step, ...: a depth is never averaged across an edge into a flying pixel),
-        with :meth:`CameraModel.decimated`; ``extras["decimation"]`` says by how much."""
+        with :meth:`CameraModel.decimated`; ``extras["decimation"]`` says by how much and
+        ``extras["full_depth"]`` keeps this frame's depth image (not copied), for the tests
+        that look at a pixel's neighbours one camera pixel away."""
         if step == 1:
             return self
         return Frame(
@@ -238,7 +240,7 @@ class Frame:
             T_base_cam=self.T_base_cam,
             base_frame=self.base_frame,
             camera_frame=self.camera_frame,
-            extras={**self.extras, "decimation": step},
+            extras={**self.extras, "decimation": step, "full_depth": self.depth},
         )
 
     @property
