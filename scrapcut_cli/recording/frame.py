@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -231,15 +231,11 @@ class Frame:
         that look at a pixel's neighbours one camera pixel away."""
         if step == 1:
             return self
-        return Frame(
-            index=self.index,
-            stamp_ns=self.stamp_ns,
+        return replace(
+            self,
             color=np.ascontiguousarray(self.color[::step, ::step]),
             depth=np.ascontiguousarray(self.depth[::step, ::step]),
             camera=self.camera.decimated(step),
-            T_base_cam=self.T_base_cam,
-            base_frame=self.base_frame,
-            camera_frame=self.camera_frame,
             extras={**self.extras, "decimation": step, "full_depth": self.depth},
         )
 
