@@ -42,6 +42,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"  # one core, before numpy / open3d load their thread pools
 
 import argparse  # noqa: E402
+import functools  # noqa: E402
 import platform  # noqa: E402
 import statistics  # noqa: E402
 import tempfile  # noqa: E402
@@ -156,8 +157,10 @@ def recording(out: Path, sim: SimConfig, file: str, per_view: int) -> Path:
     return path
 
 
+@functools.cache
 def decoded(path: Path) -> tuple[list[Any], Any]:
-    """The recording's frames, decoded, and its paint: what perception is timed on."""
+    """The recording's frames, decoded, and its paint: what perception is timed on (once per
+    recording: the 1280x720 cases share theirs)."""
     config = ScrapcutConfig()
     with open_recording(path) as rec:
         return list(rec.frames()), paint_for_recording(rec, config)[0]
