@@ -177,6 +177,22 @@ def _ray_grid(camera: CameraModel) -> NDArray[np.float32]:
     return grid
 
 
+def _every_pixel_of_rgb(rgb: NDArray[np.uint8], step: int) -> NDArray[np.uint8]:
+    """``rgb[::step, ::step]`` (H, W, 3), contiguous: gathered row by row from the kept rows'
+    bytes, a quarter faster than numpy's strided copy of 3-byte pixels."""
+    height, width = rgb.shape[:2]
+    rows = np.ascontiguousarray(rgb).reshape(height, 3 * width)[::step]
+    out = np.take(rows, _rgb_columns(width, step), axis=1)
+    return out.reshape(rows.shape[0], -1, 3)
+
+
+@functools.lru_cache(maxsize=8)
+def _rgb_columns(width: int, step: int) -> NDArray[np.intp]:
+    """The byte columns of every ``step``-th pixel of an RGB row ``width`` pixels long."""
+    pixels = np.arange(0, width, step, dtype=np.intp)
+    return (3 * pixels[:, None] + np.arange(3, dtype=np.intp)).reshape(-1)
+
+
 @dataclass(frozen=True, eq=False)
 class Frame:
     """One colour image with aligned depth and the camera pose at the image stamp.
@@ -233,7 +249,7 @@ class Frame:
             return self
         return replace(
             self,
-            color=np.ascontiguousarray(self.color[::step, ::step]),
+            color=_every_pixel_of_rgb(self.color, step),
             depth=np.ascontiguousarray(self.depth[::step, ::step]),
             camera=self.camera.decimated(step),
             extras={**self.extras, "decimation": step, "full_depth": self.depth},
