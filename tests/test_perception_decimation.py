@@ -25,8 +25,8 @@ from scrapcut_cli.perception.paint import PAINT_PRESETS
 from scrapcut_cli.recording.frame import CameraModel, Frame
 
 ORANGE = PAINT_PRESETS["orange"].hsv
-EVERY_PIXEL = PerceptionConfig()  # the default reads every pixel
-CONFIG = replace(EVERY_PIXEL, max_decimation=8)
+EVERY_PIXEL = PerceptionConfig(max_decimation=1)
+CONFIG = PerceptionConfig()  # the default reads a fine frame at every 2nd (4th, 8th) pixel
 #: A D435i-like lens with radial and tangential distortion, at 1280x720.
 LENS = CameraModel(
     1280,
@@ -207,10 +207,10 @@ def test_a_fine_frame_read_at_every_other_pixel_gives_the_same_clouds(
         assert len(fast.surface_base) == pytest.approx(len(full.surface_base), rel=0.25)
 
 
-def test_max_decimation_is_a_checked_config_key_off_by_default() -> None:
-    assert ScrapcutConfig().perception.max_decimation == 1
-    config = ScrapcutConfig().override("perception", max_decimation=2)
-    assert config.perception.max_decimation == 2
+def test_max_decimation_is_a_checked_config_key_8_by_default() -> None:
+    assert ScrapcutConfig().perception.max_decimation == 8
+    config = ScrapcutConfig().override("perception", max_decimation=1)
+    assert config.perception.max_decimation == 1
     for bad in (0, 9):
         with pytest.raises(ConfigError, match="max_decimation"):
             ScrapcutConfig().override("perception", max_decimation=bad)

@@ -2,7 +2,7 @@
 
 The recipe of one frame (:func:`process_frame`), in order:
 
-0. decimation (:func:`decimation`), when ``max_decimation`` allows it (off by default): a
+0. decimation (:func:`decimation`, up to ``max_decimation``, 8 by default; 1 is off): a
    frame whose pixels are finer than the voxels need at the scene's near depth is read at
    every 2nd (4th, 8th) pixel each way, colour and depth alike: what follows costs the same
    at 1280x720 as at 640x360;
@@ -581,8 +581,8 @@ def decimation(
     until nearer than 0.2 m. The depth gate still compares a sample with its neighbours one
     camera pixel away (``_usable``): its flying-pixel band at a depth edge would otherwise be
     ``step`` times as wide in metres and strip a thin wire seen from close up of its paint.
-    ``max_decimation`` is 1 (off) by default: on a basket's wires the exploration's fits still
-    read a little worse with it (``benchmarks/scenes.md``)."""
+    ``max_decimation`` is 8 by default (1 reads every pixel): Table I and the yard table
+    hold with it (``benchmarks/scenes.md``)."""
     if max_step < 2:
         return 1
     flat = depth.reshape(-1)
