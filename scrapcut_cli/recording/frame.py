@@ -137,16 +137,14 @@ class CameraModel:
         """The same lens at another resolution (intrinsics scaled, distortion unchanged)."""
         sx = width / self.width
         sy = height / self.height
-        return CameraModel(
+        return replace(
+            self,
             width=width,
             height=height,
             fx=self.fx * sx,
             fy=self.fy * sy,
             cx=(self.cx + 0.5) * sx - 0.5,
             cy=(self.cy + 0.5) * sy - 0.5,
-            distortion_model=self.distortion_model,
-            distortion=self.distortion,
-            frame_id=self.frame_id,
         )
 
     def decimated(self, step: int) -> CameraModel:
@@ -155,16 +153,14 @@ class CameraModel:
         focal lengths divide by ``step`` exactly (not :meth:`scaled`'s area mapping)."""
         if step == 1:
             return self
-        return CameraModel(
+        return replace(
+            self,
             width=-(-self.width // step),
             height=-(-self.height // step),
             fx=self.fx / step,
             fy=self.fy / step,
             cx=self.cx / step,
             cy=self.cy / step,
-            distortion_model=self.distortion_model,
-            distortion=self.distortion,
-            frame_id=self.frame_id,
         )
 
 
