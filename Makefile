@@ -7,7 +7,8 @@ DEMO_OUT ?= results
 
 .PHONY: demo readme guard-figures test lint unit bench clean
 
-$(STAMP): pyproject.toml
+# setup.py builds the one C extension (scrapcut_cli/_native.c) in place; an edit to it reinstalls.
+$(STAMP): pyproject.toml setup.py scrapcut_cli/_native.c
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[dev]'

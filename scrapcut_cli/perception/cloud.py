@@ -21,9 +21,10 @@ The recipe of one frame (:func:`process_frame`), in order:
    smeared pixels a stereo camera produces across depth edges);
 3. back-projection of only those pixels through the camera's cached, distortion-aware ray grid,
    into the base frame with ``T_base_cam`` (the full cloud is never built);
-4. voxel downsampling (``voxel_size_m``) and then statistical outlier removal (open3d). The
-   paper removes outliers first; downsampling first makes the outlier test see neighbours on the
-   scale of the stroke instead of sensor noise, and costs 1 ms instead of 30 ms per frame;
+4. voxel downsampling (``voxel_size_m``) and then statistical outlier removal (open3d's, to
+   the bit; computed on a grid in C, :mod:`scrapcut_cli._kernels`). The paper removes
+   outliers first; downsampling first makes the outlier test see neighbours on the scale of
+   the stroke instead of sensor noise, and costs 1 ms instead of 30 ms per frame;
 5. the surface band: non-paint pixels within ``surface_band_m`` (in 3-D) of the paint, sampled
    on a pixel grid about half a ``surface_voxel_m`` apart, downsampled at ``surface_voxel_m``.
    The tool path takes its normals and collision checks from it, on both sides of the stroke;
@@ -51,8 +52,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.ndimage import label, maximum_filter
-from scipy.spatial import cKDTree
 
+from scrapcut_cli import _kernels
 from scrapcut_cli._open3d import o3d
 from scrapcut_cli.config import PerceptionConfig
 from scrapcut_cli.errors import PerceptionError
@@ -660,14 +661,8 @@ def remove_statistical_outliers(
 
 def statistical_inliers(points: ArrayLike, *, neighbors: int, std_ratio: float) -> NDArray[np.intp]:
     """Indices (M,) ascending of the points (N, 3) that
-    :func:`remove_statistical_outliers` keeps."""
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    if neighbors == 0 or len(pts) <= neighbors:
-        return np.arange(len(pts), dtype=np.intp)
-    o3 = o3d()
-    cloud = o3.geometry.PointCloud(o3.utility.Vector3dVector(pts))
-    _, kept = cloud.remove_statistical_outlier(nb_neighbors=neighbors, std_ratio=std_ratio)
-    return np.asarray(kept, dtype=np.intp)
+    :func:`remove_statistical_outliers` keeps (compiled, :mod:`scrapcut_cli._kernels`)."""
+    return _kernels.statistical_inliers(points, neighbors=neighbors, std_ratio=std_ratio)
 
 
 def view_centre(frame: Frame, *, window: float = 0.05) -> FloatArray | None:
@@ -727,8 +722,8 @@ def surface_band(
     # Distances to the paint's centroids on a band/4 grid: 10x fewer tree nodes than the paint
     # itself, and the band's edge moves by less than that grid's half diagonal.
     coarse = voxel_downsample(paint_base, config.surface_band_m / 4.0)
-    distance, _ = cKDTree(coarse).query(points, distance_upper_bound=config.surface_band_m)
-    return voxel_downsample(points[np.isfinite(distance)], config.surface_voxel_m)
+    near = _kernels.within_distance(points, coarse, config.surface_band_m)
+    return voxel_downsample(points[near], config.surface_voxel_m)
 
 
 #: How far beyond a paint pixel the depth must go on as a surface for its boundary to be the

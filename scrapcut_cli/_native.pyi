@@ -1,0 +1,6 @@
+# The compiled kernels of _native.c (buffers: C-contiguous numpy arrays); use them through
+# scrapcut_cli._kernels, which checks the arguments and falls back when this did not build.
+from typing import Any
+
+def statistical_inliers(points: Any, k: int, std_ratio: float, out: Any, /) -> int: ...
+def within_distance(points: Any, targets: Any, radius: float, out: Any, /) -> int: ...
