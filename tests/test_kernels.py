@@ -6,6 +6,10 @@ awkward ones (duplicates, far outliers, lines, planes, fewer points than neighbo
 from __future__ import annotations
 
 import importlib
+import os
+import shutil
+import sysconfig
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -210,3 +214,14 @@ def test_within_distance_with_a_radius_tiny_against_the_spread() -> None:
     np.testing.assert_array_equal(
         _kernels.within_distance(points, targets, 1e-20), [True, True, False, False]
     )
+
+
+def test_the_extension_is_built_where_it_can_be() -> None:
+    # The extension is optional, so a build error during `pip install` is only a warning and
+    # every test above would silently run the fallback: where a C compiler and Python's headers
+    # are present (as on the machines `make test` runs on), it must have been built.
+    headers = Path(sysconfig.get_paths()["include"], "Python.h").exists()
+    compiler = any(shutil.which(cc) for cc in ("cc", "gcc", "clang"))
+    if os.environ.get("SCRAPCUT_NATIVE", "").strip() == "0" or not (headers and compiler):
+        pytest.skip("no C compiler or Python headers here, or SCRAPCUT_NATIVE=0")
+    assert _kernels.native(), "scrapcut_cli/_native.c did not build: see `pip install -v -e .`"
