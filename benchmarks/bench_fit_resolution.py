@@ -30,6 +30,8 @@ all alike).
 
 Goal (issue 12): fit >= 30 frames/s at 1280x720, the camera's own rate. This virtual machine's
 speed drifts by tens of per cent within hours: only figures from back-to-back runs compare.
+``SCRAPCUT_NATIVE=0`` in the environment times the fallback of the compiled neighbour searches
+(open3d and scipy; ``bench_kernels.py``).
 
     .venv/bin/python benchmarks/bench_fit_resolution.py [--runs 5] [--frames-per-view 10]
         [--out DIR]

@@ -4,7 +4,7 @@ wrist's 0.3 m):
 
 * outlier removal: ~3,000 paint voxels (2 mm) on a bent strip 40 mm wide, noise and 1 %
   outliers, 20 neighbours, ratio 2 (open3d's ``remove_statistical_outlier``);
-* surface band: ~8,000 surface samples against ~140 paint centroids, 40 mm
+* surface band: ~7,500 surface samples against ~90 paint centroids, 40 mm
   (scipy's ``cKDTree.query`` with ``distance_upper_bound``).
 
 Milliseconds a call, CPU time, one thread, median of ``--runs`` runs of ``--calls`` calls each
@@ -21,18 +21,18 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"  # one core, before numpy / open3d load their thread pools
 
 import argparse  # noqa: E402
-import platform  # noqa: E402
 import statistics  # noqa: E402
 import time  # noqa: E402
 from collections.abc import Callable  # noqa: E402
 
 import numpy as np  # noqa: E402
+from bench_fit_resolution import cpu_name  # noqa: E402
 
 from scrapcut_cli import _kernels  # noqa: E402
 
 
 def strip(rng: np.random.Generator, width_m: float, step_m: float) -> np.ndarray:
-    s, w = np.meshgrid(np.arange(0, 0.15, step_m), np.arange(-width_m / 2, width_m / 2, step_m))
+    s, w = np.meshgrid(np.arange(0, 0.3, step_m), np.arange(-width_m / 2, width_m / 2, step_m))
     s, w = s.ravel(), w.ravel()
     pts = np.c_[0.3 * np.sin(s / 0.3), w, 0.3 * (1 - np.cos(s / 0.3))]
     return pts + rng.normal(0, 0.0004, pts.shape) + [0.45, -0.1, 0.02]
@@ -86,7 +86,7 @@ def main() -> None:
         same = np.array_equal(results["compiled"], results["open3d/scipy"])
         rows.append((name, size, *(statistics.median(t) for t in times.values()), same))
     print(
-        f"# {platform.processor() or platform.machine()}, {os.cpu_count()} cores, one thread; "
+        f"# {cpu_name()}, {os.cpu_count()} cores, one thread; "
         f"medians of {args.runs} runs of {args.calls} calls (CPU time)"
     )
     print(f"{'kernel':18s} {'size':22s} {'compiled [ms]':>14s} {'open3d/scipy':>13s} {'same':>5s}")
