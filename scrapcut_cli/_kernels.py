@@ -6,7 +6,10 @@ band around the paint. A k-d tree answers them at a few microseconds a query; a 
 in C (``_native.c``, built by pip with the package as an optional extension) answers the same
 questions exactly, 1.6 (outliers) and 3.3 (band) times as fast at a frame's sizes
 (``benchmarks/bench_kernels.py``). Where the extension did not build (no C compiler), or with
-``SCRAPCUT_NATIVE=0`` in the environment, the same results come from open3d and scipy.
+``SCRAPCUT_NATIVE=0`` in the environment, the same results come from open3d and scipy; so
+they do for a cloud the grid does not suit (a dense knot in a sparse cloud), which the compiled
+outlier removal declines. The band's targets are the paint's centroids on a grid a quarter of
+the band wide, so a cell of the band's size holds a few tens of them.
 
 The compiled outlier removal follows open3d's ``remove_statistical_outlier`` to the bit: the
 mean distance to the k nearest points (the point itself among them) summed in ascending order,
@@ -54,8 +57,9 @@ def statistical_inliers(points: ArrayLike, *, neighbors: int, std_ratio: float) 
         return np.arange(len(pts), dtype=np.intp)
     if _native is not None and np.isfinite(pts).all():
         keep = np.empty(len(pts), dtype=np.uint8)
-        _native.statistical_inliers(pts, neighbors, float(std_ratio), keep)
-        return np.flatnonzero(keep)
+        # -1: a cloud of dense and sparse parts, which no one grid suits: open3d's tree
+        if _native.statistical_inliers(pts, neighbors, float(std_ratio), keep) >= 0:
+            return np.flatnonzero(keep)
     o3 = o3d()
     cloud = o3.geometry.PointCloud(o3.utility.Vector3dVector(pts))
     _, kept = cloud.remove_statistical_outlier(nb_neighbors=neighbors, std_ratio=std_ratio)

@@ -6,7 +6,9 @@
  * whose k-th nearest candidate is no farther than that block's nearest open face has its k
  * nearest, the others search shell by shell (Chebyshev shells of cells around their own) until
  * the same holds, or scan every point when that would take many shells (an outlier far from
- * the rest). The neighbours are exact whatever the cell size, which only sets the speed.
+ * the rest). The neighbours are exact whatever the cell size, which only sets the speed; when
+ * an eighth of the points need the shells (a dense knot in a sparse cloud: no one cell size
+ * suits both) the kernel declines and the caller uses a k-d tree.
  *
  * Built by pip with the package (setup.py: an optional extension); scrapcut_cli/_kernels.py
  * is the Python interface and falls back to open3d / scipy when this did not build.
@@ -23,7 +25,7 @@
 #include <string.h>
 
 /* Shells beyond this many are not searched: the query scans every point instead. */
-#define MAX_SHELLS 6
+#define MAX_SHELLS 3
 
 typedef struct {
     int64_t x, y, z;
@@ -293,9 +295,11 @@ static void sort_small(double *v, int n) {
 }
 
 /* Every grid point's mean distance to its k nearest grid points (itself among them), summed
- * in ascending order as open3d does, into means[index[i]] (index: grid_build's). 0, or -1
- * out of memory. */
+ * in ascending order as open3d does, into means[index[i]] (index: grid_build's). 0; -1 out
+ * of memory; 1 when too many points (an eighth) lie too far apart for the cell, which a cloud
+ * of dense and sparse parts does (a k-d tree is then faster: the caller takes one). */
 static int mean_distances(const Grid *g, int k, const Py_ssize_t *index, double *means) {
+    Py_ssize_t far = 0, far_limit = g->n / 8 + 16;
     Py_ssize_t capacity = 0;
     double *cand = NULL, *dist = NULL, *best = malloc(sizeof(double) * (size_t)k);
     int *idx = NULL, *prev_best = malloc(sizeof(int) * (size_t)k);
@@ -366,6 +370,10 @@ static int mean_distances(const Grid *g, int k, const Py_ssize_t *index, double 
             }
             double reach = block_reach(g, q, c, 1);
             if (isfinite(reach) && !(count == k && reach > 0 && best[k - 1] <= reach * reach)) {
+                if (++far > far_limit) {
+                    failed = 1;
+                    break;
+                }
                 count = nearest(g, q, k, best);
             }
             double sum = 0.0;
@@ -380,7 +388,7 @@ static int mean_distances(const Grid *g, int k, const Py_ssize_t *index, double 
     free(idx);
     free(best);
     free(prev_best);
-    return failed ? -1 : 0;
+    return failed ? (far > far_limit ? 1 : -1) : 0;
 }
 
 /* A grid cell for the k-nearest search of these n points: 1.25 times the median distance to
@@ -420,7 +428,7 @@ static double cell_for(const double *pts, Py_ssize_t n, int k, double *dist, int
     return cell > 0 ? cell : 1.0;
 }
 
-/* statistical_inliers(points, k, std_ratio, out) -> kept
+/* statistical_inliers(points, k, std_ratio, out) -> kept, or -1 declined (mean_distances)
  *
  * points: C-contiguous float64 (N, 3), finite; out: writable uint8 (N,), set to 1 for a kept
  * point. open3d's statistical outlier removal: the mean distance of each point to its k
@@ -464,9 +472,14 @@ static PyObject *statistical_inliers(PyObject *self, PyObject *args) {
         goto done;
     }
     Py_ssize_t kept = 0;
+    int status = 0;
     Py_BEGIN_ALLOW_THREADS;
     double size = cell_for(pts, n, k, means, idx);
-    if (grid_build(&grid, pts, n, size, index) == 0 && mean_distances(&grid, k, index, means) == 0) {
+    status = grid_build(&grid, pts, n, size, index);
+    if (status == 0) {
+        status = mean_distances(&grid, k, index, means);
+    }
+    if (status == 0) {
         double mean = 0.0, squares = 0.0;
         for (Py_ssize_t i = 0; i < n; i++) {
             if (means[i] > 0) {
@@ -484,15 +497,13 @@ static PyObject *statistical_inliers(PyObject *self, PyObject *args) {
             keep[i] = means[i] > 0 && means[i] < threshold;
             kept += keep[i];
         }
-    } else {
-        kept = -1;
     }
     Py_END_ALLOW_THREADS;
-    if (kept < 0) {
+    if (status < 0) {
         PyErr_NoMemory();
         goto done;
     }
-    result = PyLong_FromSsize_t(kept);
+    result = PyLong_FromSsize_t(status == 0 ? kept : -1);
 done:
     grid_free(&grid);
     free(means);
@@ -586,7 +597,7 @@ done:
 
 static PyMethodDef methods[] = {
     {"statistical_inliers", statistical_inliers, METH_VARARGS,
-     "statistical_inliers(points, k, std_ratio, out) -> number kept"},
+     "statistical_inliers(points, k, std_ratio, out) -> number kept, -1 declined"},
     {"within_distance", within_distance, METH_VARARGS,
      "within_distance(points, targets, radius, out) -> number within"},
     {NULL, NULL, 0, NULL},

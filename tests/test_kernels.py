@@ -50,6 +50,8 @@ def clouds() -> list[tuple[str, np.ndarray]]:
     blob = rng.normal(size=(800, 3))
     far = stroke_cloud(rng, 5)
     far[:3] += [50.0, -20.0, 1000.0]  # a handful kilometres off: the exhaustive fallback
+    # a tight knot in a sparse cloud: no one grid suits both, the kernel declines (open3d)
+    knot = np.vstack([rng.normal(0, 1e-4, (600, 3)), rng.uniform(-1, 1, (300, 3))])
     return [
         ("stroke", stroke_cloud(rng)),
         ("stroke, no outliers", stroke_cloud(rng, 0)),
@@ -58,6 +60,7 @@ def clouds() -> list[tuple[str, np.ndarray]]:
         ("plane", plane),
         ("gaussian blob", blob),
         ("far outliers", far),
+        ("dense knot in a sparse cloud", knot),
     ]
 
 
@@ -100,6 +103,18 @@ def test_outlier_removal_on_random_clouds_equals_open3d() -> None:
             open3d_inliers(points, k, ratio) if n > k else np.arange(n),
             err_msg=f"trial {trial}: n={n} k={k}",
         )
+
+
+@native
+def test_the_kernel_declines_a_cloud_no_grid_suits() -> None:
+    from scrapcut_cli import _native
+
+    rng = np.random.default_rng(4)
+    knot = np.vstack([rng.normal(0, 1e-4, (2000, 3)), rng.uniform(-1, 1, (1000, 3))])
+    assert _native.statistical_inliers(knot, 20, 2.0, np.zeros(len(knot), np.uint8)) == -1
+    strip = stroke_cloud(rng)
+    kept = _native.statistical_inliers(strip, 20, 2.0, keep := np.zeros(len(strip), np.uint8))
+    assert kept == keep.sum() > 0.9 * len(strip)
 
 
 def test_outlier_removal_edge_cases_without_a_tree() -> None:
