@@ -30,8 +30,9 @@ all alike).
 
 Goal (issue 12): fit >= 30 frames/s at 1280x720, the camera's own rate. This virtual machine's
 speed drifts by tens of per cent within hours: only figures from back-to-back runs compare.
-``SCRAPCUT_NATIVE=0`` in the environment times the fallback of the compiled neighbour searches
-(open3d and scipy; ``bench_kernels.py``).
+The last row, ``SCRAPCUT_NATIVE=0``, is the 1280x720 case again with the compiled neighbour
+searches switched off (open3d and scipy instead; ``bench_kernels.py``), timed in turn with the
+others; ``SCRAPCUT_NATIVE=0`` in the environment switches them off in every row.
 
     .venv/bin/python benchmarks/bench_fit_resolution.py [--runs 5] [--frames-per-view 10]
         [--out DIR]
@@ -53,6 +54,7 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
+from scrapcut_cli import _kernels  # noqa: E402
 from scrapcut_cli.config import ScrapcutConfig, SimConfig  # noqa: E402
 from scrapcut_cli.perception.stitch import stitch_recording  # noqa: E402
 from scrapcut_cli.pipeline.fit import (  # noqa: E402
@@ -64,17 +66,26 @@ from scrapcut_cli.recording.reader import open_recording  # noqa: E402
 from scrapcut_cli.sim import record  # noqa: E402
 
 #: (the sweep's simulator settings, its file name, perception.max_decimation)
+#: name: (sweep, file, --max-decimation, compiled neighbour searches)
 CASES = {
-    "640x480 rgb8 MCAP": (SimConfig(width=640, height=480), "cylinder_640.mcap", 8),
+    "640x480 rgb8 MCAP": (SimConfig(width=640, height=480), "cylinder_640.mcap", 8, True),
     "1280x720 JPEG ROS2 sqlite3": (
         SimConfig(width=1280, height=720, color_encoding="jpeg"),
         "cylinder_1280_jpeg",
         8,
+        True,
     ),
     "  --max-decimation 1": (
         SimConfig(width=1280, height=720, color_encoding="jpeg"),
         "cylinder_1280_jpeg",
         1,
+        True,
+    ),
+    "  SCRAPCUT_NATIVE=0": (
+        SimConfig(width=1280, height=720, color_encoding="jpeg"),
+        "cylinder_1280_jpeg",
+        8,
+        False,
     ),
 }
 
@@ -113,7 +124,10 @@ def main() -> None:
         f"{'fixed [s]':>10s} {'perception':>11s}"
     )
     cases = []
-    for name, (sim, file, max_decimation) in CASES.items():
+    compiled = _kernels._native
+    for name, (sim, file, max_decimation, native) in CASES.items():
+        if native and compiled is None:
+            print(f"# {name.strip()}: the compiled neighbour searches are off or not built")
         config = ScrapcutConfig().override("perception", max_decimation=max_decimation)
         paths = [recording(out, sim, file, k * args.frames_per_view) for k in (1, 2)]
         counts = []
@@ -121,19 +135,21 @@ def main() -> None:
             with open_recording(path) as rec:
                 counts.append(rec.plan().usable)
             fit(path, config)  # warm: imports, cached ray grids
-        cases.append((name, config, paths, counts, decoded(paths[0])))
+        cases.append((name, config, paths, counts, decoded(paths[0]), compiled if native else None))
     # Every case's recordings are timed one after the other in each run, so that the
     # machine's drift falls on all alike; the per-frame cost is the median of the runs'
     # differences between a case's two recordings.
     times: list[list[list[float]]] = [[] for _ in cases]
     perception: list[list[float]] = [[] for _ in cases]
     for _ in range(args.runs):
-        for k, (_, config, paths, _, (frames, hsv)) in enumerate(cases):
+        for k, (_, config, paths, _, (frames, hsv), kernels) in enumerate(cases):
+            _kernels._native = kernels  # the compiled searches, or open3d / scipy
             times[k].append([cpu_seconds(lambda p=p, c=config: fit(p, c)) for p in paths])
             perception[k].append(
                 cpu_seconds(lambda f=frames, h=hsv, c=config: stitch_recording(f, h, c))
             )
-    for (name, _, _, counts, _), runs, perceive in zip(cases, times, perception, strict=True):
+    _kernels._native = compiled
+    for (name, _, _, counts, _, _), runs, perceive in zip(cases, times, perception, strict=True):
         fit_s = statistical_median([t[0] for t in runs])
         per_frame_s = statistical_median([(t[1] - t[0]) / (counts[1] - counts[0]) for t in runs])
         n = counts[0]
