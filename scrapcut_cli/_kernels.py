@@ -55,7 +55,7 @@ def statistical_inliers(points: ArrayLike, *, neighbors: int, std_ratio: float) 
     pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     if neighbors == 0 or len(pts) <= neighbors:
         return np.arange(len(pts), dtype=np.intp)
-    if _native is not None and np.isfinite(pts).all():
+    if _native is not None and std_ratio > 0 and np.isfinite(pts).all():
         keep = np.empty(len(pts), dtype=np.uint8)
         # -1: a cloud of dense and sparse parts, which no one grid suits: open3d's tree
         if _native.statistical_inliers(pts, neighbors, float(std_ratio), keep) >= 0:
@@ -72,7 +72,8 @@ def within_distance(points: ArrayLike, targets: ArrayLike, radius: float) -> NDA
     tgt = np.ascontiguousarray(targets, dtype=np.float64).reshape(-1, 3)
     if len(pts) == 0 or len(tgt) == 0 or not radius > 0:
         return np.zeros(len(pts), dtype=bool)
-    if _native is not None and np.isfinite(pts).all() and np.isfinite(tgt).all():
+    finite = np.isfinite(radius) and np.isfinite(pts).all() and np.isfinite(tgt).all()
+    if _native is not None and finite:
         hit = np.empty(len(pts), dtype=np.uint8)
         _native.within_distance(pts, tgt, float(radius), hit)
         return hit.view(bool)

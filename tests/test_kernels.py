@@ -135,6 +135,12 @@ def test_all_points_on_one_spot_keep_none_like_open3d() -> None:
     assert open3d_inliers(pts, 5, 2.0).size == 0
 
 
+def test_a_ratio_open3d_refuses_is_refused_alike() -> None:
+    pts = stroke_cloud(np.random.default_rng(8))
+    with pytest.raises(RuntimeError, match="positive"):
+        _kernels.statistical_inliers(pts, neighbors=20, std_ratio=0.0)
+
+
 def test_non_finite_points_take_open3d_s_path() -> None:
     pts = stroke_cloud(np.random.default_rng(5))
     pts[4] = np.nan
@@ -179,6 +185,7 @@ def test_within_distance_without_points_targets_or_radius() -> None:
     assert not _kernels.within_distance(pts, np.zeros((0, 3)), 1.0).any()
     assert _kernels.within_distance(np.zeros((0, 3)), pts, 1.0).shape == (0,)
     assert not _kernels.within_distance(pts, pts, 0.0).any()
+    assert _kernels.within_distance(pts, np.zeros((1, 3)), float("inf")).all()
 
 
 def test_fallback_gives_the_same_results(monkeypatch: pytest.MonkeyPatch) -> None:

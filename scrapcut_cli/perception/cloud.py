@@ -719,7 +719,7 @@ def surface_band(
     points = backproject_pixels(camera, frame.depth, usable, frame.T_base_cam)
     if len(points) == 0:
         return points
-    # Distances to the paint's centroids on a band/4 grid: 10x fewer tree nodes than the paint
+    # Distances to the paint's centroids on a band/4 grid: 10x fewer targets than the paint
     # itself, and the band's edge moves by less than that grid's half diagonal.
     coarse = voxel_downsample(paint_base, config.surface_band_m / 4.0)
     near = _kernels.within_distance(points, coarse, config.surface_band_m)
