@@ -65,8 +65,8 @@ from scrapcut_cli.pipeline.fit import (  # noqa: E402
 from scrapcut_cli.recording.reader import open_recording  # noqa: E402
 from scrapcut_cli.sim import record  # noqa: E402
 
-#: (the sweep's simulator settings, its file name, perception.max_decimation)
-#: name: (sweep, file, --max-decimation, compiled neighbour searches)
+#: name: (the sweep's simulator settings, its file name, perception.max_decimation, whether the
+#: compiled neighbour searches are on)
 CASES = {
     "640x480 rgb8 MCAP": (SimConfig(width=640, height=480), "cylinder_640.mcap", 8, True),
     "1280x720 JPEG ROS2 sqlite3": (

@@ -72,8 +72,12 @@ def within_distance(points: ArrayLike, targets: ArrayLike, radius: float) -> NDA
     tgt = np.ascontiguousarray(targets, dtype=np.float64).reshape(-1, 3)
     if len(pts) == 0 or len(tgt) == 0 or not radius > 0:
         return np.zeros(len(pts), dtype=bool)
-    finite = np.isfinite(radius) and np.isfinite(pts).all() and np.isfinite(tgt).all()
-    if _native is not None and finite:
+    if (
+        _native is not None
+        and np.isfinite(radius)
+        and np.isfinite(pts).all()
+        and np.isfinite(tgt).all()
+    ):
         hit = np.empty(len(pts), dtype=np.uint8)
         _native.within_distance(pts, tgt, float(radius), hit)
         return hit.view(bool)
